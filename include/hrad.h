@@ -1,0 +1,226 @@
+/* hrad: hierarchical radiosity after Bohn & Garmann, "A Parallel Approach to Hierarchical
+ * Radiosity" (WSCG'95). Public API: scenes, the solver, results and writers.
+ *
+ * Conventions: fallible functions return an hr_status and hand results back through their last
+ * pointer argument; an hr_err receives a one-line message "FILE:LINE: what is wrong" (or just
+ * "what is wrong" when there is no file). The library never prints; warnings go to an optional
+ * hr_log callback. create/destroy pairs: destroy accepts NULL.
+ */
+#ifndef HRAD_H
+#define HRAD_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef enum {
+  HR_OK = 0,
+  HR_ERR_IO,        /* file missing or unreadable/unwritable */
+  HR_ERR_PARSE,     /* malformed input */
+  HR_ERR_INVALID,   /* bad values: NaN, out of range, bad option */
+  HR_ERR_NOMEM,     /* allocation failed */
+  HR_ERR_NO_EMITTER,/* scene has nothing that emits light */
+  HR_ERR_TOO_BIG    /* refused: work would exceed a stated limit */
+} hr_status;
+
+typedef struct hr_err {
+  char msg[512];
+} hr_err;
+
+/* Warning sink; 'msg' is one line without a trailing newline. */
+typedef void (*hr_log_fn)(void *ud, const char *msg);
+typedef struct hr_log {
+  hr_log_fn fn;
+  void *ud;
+} hr_log;
+
+/* Sets err->msg printf-style (if err is non-NULL) and returns 'st'. */
+hr_status hr_err_set(hr_err *err, hr_status st, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 3, 4)))
+#endif
+    ;
+/* Sends a formatted warning to 'log' (ignored when log or log->fn is NULL). */
+void hr_log_warn(const hr_log *log, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 2, 3)))
+#endif
+    ;
+
+typedef struct hr_vec3 {
+  double x, y, z;
+} hr_vec3;
+
+/* ---------------------------------------------------------------- scene (scene.c) */
+
+typedef struct hr_material {
+  char *name;
+  double rho[3];  /* diffuse reflectance, RGB, 0..1 */
+  double emit[3]; /* emitted radiosity E, RGB, W/m^2 */
+} hr_material;
+
+/* A surface is a planar triangle or convex planar quad (the paper's "surface"/"blocker").
+ * Vertices are counter-clockwise seen from the front; light leaves the front only. */
+typedef struct hr_surface {
+  int nverts;     /* 3 or 4 */
+  hr_vec3 v[4];
+  hr_vec3 normal; /* unit, front side */
+  double area;
+  int material;   /* index into scene->mats */
+  int poly;       /* index of the input polygon it came from (row of surfaces.csv) */
+} hr_surface;
+
+typedef struct hr_camera {
+  hr_vec3 eye, at, up;
+  double fov_deg; /* vertical field of view */
+} hr_camera;
+
+typedef struct hr_scene {
+  char *name;          /* "room", or the OBJ's base name without extension */
+  hr_material *mats;
+  int nmats, cap_mats;
+  hr_surface *surfs;
+  int nsurfs, cap_surfs;
+  int npolys;          /* number of input polygons (>= 1 surface each) */
+  double *poly_area;   /* [npolys] */
+  int has_camera;
+  hr_camera camera;
+} hr_scene;
+
+hr_status hr_scene_create(const char *name, hr_scene **out);
+void hr_scene_destroy(hr_scene **s);
+/* Adds a material (name copied); returns its index through 'idx'. */
+hr_status hr_scene_add_material(hr_scene *s, const char *name, const double rho[3],
+                                const double emit[3], int *idx);
+/* Finds a material by exact name; returns its index or -1. */
+int hr_scene_find_material(const hr_scene *s, const char *name);
+
+/* Result of adding a polygon. */
+typedef enum {
+  HR_POLY_ADDED = 0,    /* became one or more surfaces */
+  HR_POLY_DEGENERATE,   /* zero area (or collinear); nothing added, caller should warn */
+  HR_POLY_NONPLANAR     /* > 4 vertices and not planar within tolerance; nothing added */
+} hr_poly_result;
+
+/* Adds one input polygon with 'n' >= 3 vertices (counter-clockwise from the front) and the
+ * given material. A planar convex quad stays one surface; a non-planar or non-convex quad is
+ * split into two triangles; polygons with more than 4 vertices are fan-split into triangles
+ * (degenerate fan triangles dropped). All surfaces created get the same 'poly' index.
+ * Coordinates must be finite (HR_ERR_INVALID otherwise). '*res' tells what happened. */
+hr_status hr_scene_add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
+                               hr_poly_result *res);
+/* Total area of all surfaces, largest emitted radiosity over surfaces and channels. */
+double hr_scene_total_area(const hr_scene *s);
+double hr_scene_max_emit(const hr_scene *s);
+/* Axis-aligned bounds of all vertices. */
+void hr_scene_bounds(const hr_scene *s, hr_vec3 *lo, hr_vec3 *hi);
+/* Chooses a camera looking at the whole scene (used when a scene has none). */
+void hr_scene_auto_camera(const hr_scene *s, hr_camera *cam);
+
+/* ---------------------------------------------------------------- loading (obj.c, builtin.c) */
+
+/* Parses Wavefront OBJ text 'buf' (length 'len'); 'path' names it in messages and locates
+ * mtllib files (relative to its directory). Errors are "PATH:LINE: what". Warnings (degenerate
+ * polygons, missing MTL, unknown statements) go to 'log'. */
+hr_status hr_scene_parse_obj(const char *buf, size_t len, const char *path, const hr_log *log,
+                             hr_scene **out, hr_err *err);
+/* Reads the file at 'path' and parses it. */
+hr_status hr_scene_load_obj(const char *path, const hr_log *log, hr_scene **out, hr_err *err);
+/* Builds a built-in scene: "room", "floor", "museum", "cornell". HR_ERR_INVALID if unknown. */
+hr_status hr_scene_builtin(const char *name, hr_scene **out, hr_err *err);
+/* NULL-terminated list of built-in scene names. */
+const char *const *hr_scene_builtin_names(void);
+/* Makes material 'name' emit 'rgb'; HR_ERR_INVALID if no such material. */
+hr_status hr_scene_set_emit(hr_scene *s, const char *name, const double rgb[3], hr_err *err);
+
+/* ---------------------------------------------------------------- solver (solve.c) */
+
+typedef struct hr_options {
+  double bf_low;      /* final refinement threshold BF_low, relative to max emitted radiosity */
+  double bf_start;    /* first BF_e of the multigrid schedule (relative) */
+  double bf_factor;   /* BF_e is divided by this each outer step (> 1) */
+  double area_min;    /* A_e, relative to the total scene area */
+  double b_eps;       /* B_e: convergence when max change of B (relative to max E) is below */
+  double b_max;       /* B_max of section 2.2.4 (relative), > b_eps */
+  int relax;          /* section 2.2.4 relaxed inner loop on/off */
+  int relax_links;    /* "many new links": relative growth threshold in percent */
+  int rays;           /* k: rays per link for the visibility fraction H */
+  uint64_t seed;      /* jitter seed */
+  int threads;        /* 0 = all cores */
+  int max_iters;      /* safety limit on total iterations */
+  double max_links;   /* refuse initial linking above this many surface pairs (0 = no limit) */
+} hr_options;
+
+/* Fills 'o' with the defaults. */
+void hr_options_default(hr_options *o);
+
+typedef struct hr_solver hr_solver;
+
+/* Per-iteration report, for progress lines and snapshots (paper step {15}). */
+typedef struct hr_iter_info {
+  int iter;          /* 1-based */
+  double bf_e;       /* current BF_e (relative) */
+  int64_t elements;  /* leaf elements */
+  int64_t links;
+  double max_change; /* relative to max E */
+  double elapsed_s;
+} hr_iter_info;
+/* Called after each push-pull; return non-zero to stop. */
+typedef int (*hr_iter_fn)(void *ud, const hr_solver *s, const hr_iter_info *info);
+
+typedef struct hr_timing {
+  double init_graph, refine, gather, push_pull, total;
+} hr_timing;
+
+typedef struct hr_stats {
+  int nsurfaces, npolys;
+  int64_t elements;     /* leaves */
+  int64_t elements_all; /* all nodes of all quadtrees */
+  int64_t links;
+  int64_t initial_links;
+  int iterations;
+  int64_t rays;
+  int converged;        /* 1 if B_e reached at BF_low */
+  int threads;
+  double peak_rss_mb;
+  hr_timing time_s;
+} hr_stats;
+
+hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solver **out,
+                           hr_err *err);
+void hr_solver_destroy(hr_solver **s);
+/* Runs Figure 3 to completion. 'cb' may be NULL. */
+hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err);
+void hr_solver_stats(const hr_solver *s, hr_stats *st);
+
+/* Area-weighted mean radiosity of input polygon 'poly' (rgb out). */
+void hr_solver_poly_radiosity(const hr_solver *s, int poly, double rgb[3]);
+
+/* Leaf elements, for rendering and meshes. Corner lattice coordinates are integers on the
+ * surface's parameter lattice of side HR_LATTICE (= 2^HR_MAX_DEPTH): for a quad, (a,b) are
+ * (u,v)*HR_LATTICE with corners v0=(0,0), v1=(L,0), v2=(L,L), v3=(0,L); for a triangle, (a,b)
+ * are the barycentric weights of v1 and v2 times HR_LATTICE (v0 = (0,0), v1 = (L,0),
+ * v2 = (0,L)). Corners are counter-clockwise like the surface. Two leaves of one surface share
+ * a vertex exactly when their lattice coordinates are equal. */
+#define HR_MAX_DEPTH 24
+#define HR_LATTICE (1u << HR_MAX_DEPTH)
+typedef struct hr_leaf {
+  int surf;
+  int nverts;          /* 3 or 4 */
+  uint32_t lat[4][2];
+  hr_vec3 p[4];        /* world positions of the corners */
+  double area;
+  double B[3];         /* radiosity, RGB */
+} hr_leaf;
+
+/* Copies the current leaves (any order stable for a given solution); caller frees *leaves. */
+hr_status hr_solver_leaves(const hr_solver *s, hr_leaf **leaves, int64_t *nleaves);
+const hr_scene *hr_solver_scene(const hr_solver *s);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,63 @@
+/* vis.h: visibility between points on surfaces (paper 1.2: H_ij, the visible fraction, estimated
+ * by rays) and shaft-culled candidate blocker lists (paper 2.2.1). Internal API.
+ *
+ * A "segment" runs from org to dst, both lying on surfaces of the scene. It is unoccluded when no
+ * surface other than 'skip_a' and 'skip_b' (the receiver's and source's surfaces; -1 for none)
+ * crosses it strictly between its ends (parameter t in [HR_VIS_EPS, 1 - HR_VIS_EPS]).
+ * All functions here are thread-safe for concurrent calls on the same const objects. */
+#ifndef HR_VIS_H
+#define HR_VIS_H
+
+#include "hrad.h"
+#include <stdint.h>
+
+#define HR_VIS_EPS 1e-5
+
+typedef struct hr_vis hr_vis;
+
+/* Builds the ray-casting structure (Embree 3, its own device with threads=1 so that hrad's
+ * threads do the parallelism). On error returns non-OK with a message in 'err'. */
+hr_status hr_vis_create(const hr_scene *s, hr_vis **out, hr_err *err);
+void hr_vis_destroy(hr_vis **v);
+
+/* Tests 'n' segments (org[i] -> dst[i]; 3 floats each) with Embree, in packets; vis[i] = 1 when
+ * unoccluded, else 0. Any n >= 0. */
+void hr_vis_segments(const hr_vis *v, int n, const float *org, const float *dst, int skip_a,
+                     int skip_b, uint8_t *vis);
+
+/* The same test, brute force against only the surfaces listed in 'cand' (ncand of them). Exact
+ * ray/polygon tests in double precision. */
+void hr_vis_segments_cand(const hr_scene *s, const int32_t *cand, int ncand, int n,
+                          const float *org, const float *dst, int skip_a, int skip_b,
+                          uint8_t *vis);
+
+/* Slow reference: brute force against every surface of the scene. */
+void hr_vis_segments_ref(const hr_scene *s, int n, const float *org, const float *dst,
+                         int skip_a, int skip_b, uint8_t *vis);
+
+/* ---- shaft culling (shaft.c) ----
+ * The shaft of two convex polygons is (a conservative superset of) their convex hull. A surface
+ * is a candidate blocker when it may intersect the shaft; surfaces entirely behind the plane of
+ * either polygon (on its back side) or the polygons' own surfaces cannot block and are left out.
+ * Conservative: a surface that can block any segment between the two polygons is always listed. */
+typedef struct hr_shaft_index hr_shaft_index;
+
+/* Builds a bounding-volume hierarchy over the surfaces' bounding boxes. */
+hr_status hr_shaft_index_create(const hr_scene *s, hr_shaft_index **out);
+void hr_shaft_index_destroy(hr_shaft_index **x);
+
+/* Candidate blockers between polygon pa (na vertices, surface id sa) and pb (nb, sb), found
+ * through the BVH (not by testing every surface). Appends surface ids in increasing order to
+ * '*out' (a growable array with '*nout' used and '*cap' allocated; realloc'd as needed).
+ * Returns HR_ERR_NOMEM if growing fails. */
+hr_status hr_shaft_candidates(const hr_shaft_index *x, const hr_vec3 *pa, int na, int sa,
+                              const hr_vec3 *pb, int nb, int sb, int32_t **out, int *nout,
+                              int *cap);
+
+/* Shrinks a parent's list for a sub-shaft: writes to 'out' (room for ncand) those of
+ * cand[0..ncand) that may intersect the shaft of pa and pb, keeping their order; returns the
+ * count. */
+int hr_shaft_filter(const hr_scene *s, const hr_vec3 *pa, int na, int sa, const hr_vec3 *pb,
+                    int nb, int sb, const int32_t *cand, int ncand, int32_t *out);
+
+#endif
