@@ -1,0 +1,165 @@
+/* elem.c: element quadtrees (paper 2.2: "patchtree", "toppatch", "elements"). Each surface is the
+ * root of a tree; subdivision splits a quad into 4 quads at its edge midpoints (in the bilinear
+ * parameter space) and a triangle into 4 triangles at its edge midpoints. An element's corners
+ * are integer lattice points of its surface (see hr_leaf in hrad.h), so its geometry follows
+ * from (surface, lattice corners) alone, and its global id from (surface, path). */
+#include "solver_impl.h"
+#include "vec.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+/* World position of lattice point (a, b) on surface 'f'. */
+static hr_vec3 lattice_point(const hr_surface *f, uint32_t a, uint32_t b) {
+  double u = (double)a / HR_LATTICE, v = (double)b / HR_LATTICE;
+  if (f->nverts == 4) {
+    hr_vec3 p0 = v3_lerp(f->v[0], f->v[1], u), p1 = v3_lerp(f->v[3], f->v[2], u);
+    return v3_lerp(p0, p1, v);
+  }
+  return v3_add(f->v[0], v3_add(v3_scale(v3_sub(f->v[1], f->v[0]), u),
+                                v3_scale(v3_sub(f->v[2], f->v[0]), v)));
+}
+
+/* Fills world corners, centroid and area from the lattice corners. */
+static void elem_geometry(const hr_scene *sc, hr_elem *e) {
+  const hr_surface *f = &sc->surfs[e->surf];
+  int n = f->nverts;
+  hr_vec3 c = {0, 0, 0};
+  for (int k = 0; k < n; k++) {
+    e->p[k] = lattice_point(f, e->lat[k][0], e->lat[k][1]);
+    c = v3_add(c, e->p[k]);
+  }
+  if (n == 3) e->p[3] = e->p[2];
+  e->c = v3_scale(c, 1.0 / n);
+  hr_vec3 cr = n == 4 ? v3_cross(v3_sub(e->p[2], e->p[0]), v3_sub(e->p[3], e->p[1]))
+                      : v3_cross(v3_sub(e->p[1], e->p[0]), v3_sub(e->p[2], e->p[0]));
+  e->area = 0.5 * v3_len(cr);
+}
+
+static int reserve(hr_solver *s, int64_t need) {
+  if (need <= s->cap_el) return 1;
+  int64_t nc = s->cap_el ? s->cap_el : 64;
+  while (nc < need) nc *= 2;
+  hr_elem *el = realloc(s->el, (size_t)nc * sizeof *el);
+  if (!el) return 0;
+  s->el = el;
+  double(*B)[3] = realloc(s->B, (size_t)nc * sizeof *B);
+  if (!B) return 0;
+  s->B = B;
+  double(*G)[3] = realloc(s->G, (size_t)nc * sizeof *G);
+  if (!G) return 0;
+  s->G = G;
+  s->cap_el = nc;
+  return 1;
+}
+
+hr_status hr_elem_init(hr_solver *s) {
+  const hr_scene *sc = s->scene;
+  if (!reserve(s, sc->nsurfs)) return HR_ERR_NOMEM;
+  for (int i = 0; i < sc->nsurfs; i++) {
+    hr_elem *e = &s->el[i];
+    memset(e, 0, sizeof *e);
+    e->gid = ((uint64_t)i << HR_GID_PATH_BITS) | 1u;
+    e->surf = i;
+    e->parent = -1;
+    e->child = -1;
+    e->depth = 0;
+    uint32_t L = HR_LATTICE;
+    if (sc->surfs[i].nverts == 4) {
+      uint32_t q[4][2] = {{0, 0}, {L, 0}, {L, L}, {0, L}};
+      memcpy(e->lat, q, sizeof q);
+    } else {
+      uint32_t t[4][2] = {{0, 0}, {L, 0}, {0, L}, {0, L}};
+      memcpy(e->lat, t, sizeof t);
+    }
+    elem_geometry(sc, e);
+    const double *E = sc->mats[sc->surfs[i].material].emit;
+    for (int c = 0; c < 3; c++) {
+      s->B[i][c] = E[c];
+      s->G[i][c] = 0;
+    }
+  }
+  s->nel = sc->nsurfs;
+  return HR_OK;
+}
+
+static void mid(const uint32_t a[2], const uint32_t b[2], uint32_t m[2]) {
+  m[0] = (a[0] + b[0]) / 2;
+  m[1] = (a[1] + b[1]) / 2;
+}
+
+hr_status hr_elem_subdivide(hr_solver *s, int32_t idx) {
+  if (s->el[idx].child >= 0) return HR_OK;
+  if (s->el[idx].depth >= HR_GID_DEPTH) return HR_OK;
+  if (!reserve(s, s->nel + 4)) return HR_ERR_NOMEM;
+  hr_elem *p = &s->el[idx];
+  int n = s->scene->surfs[p->surf].nverts;
+  uint32_t ch[4][4][2];
+  if (n == 4) {
+    uint32_t m01[2], m12[2], m23[2], m30[2], mc[2];
+    mid(p->lat[0], p->lat[1], m01);
+    mid(p->lat[1], p->lat[2], m12);
+    mid(p->lat[2], p->lat[3], m23);
+    mid(p->lat[3], p->lat[0], m30);
+    mid(p->lat[0], p->lat[2], mc);
+    const uint32_t *q[4][4] = {{p->lat[0], m01, mc, m30},
+                               {m01, p->lat[1], m12, mc},
+                               {mc, m12, p->lat[2], m23},
+                               {m30, mc, m23, p->lat[3]}};
+    for (int k = 0; k < 4; k++)
+      for (int j = 0; j < 4; j++) memcpy(ch[k][j], q[k][j], sizeof ch[k][j]);
+  } else {
+    uint32_t m01[2], m12[2], m20[2];
+    mid(p->lat[0], p->lat[1], m01);
+    mid(p->lat[1], p->lat[2], m12);
+    mid(p->lat[2], p->lat[0], m20);
+    const uint32_t *t[4][3] = {{p->lat[0], m01, m20},
+                               {m01, p->lat[1], m12},
+                               {m20, m12, p->lat[2]},
+                               {m12, m20, m01}};
+    for (int k = 0; k < 4; k++) {
+      for (int j = 0; j < 3; j++) memcpy(ch[k][j], t[k][j], sizeof ch[k][j]);
+      memcpy(ch[k][3], ch[k][2], sizeof ch[k][3]);
+    }
+  }
+  int32_t first = (int32_t)s->nel;
+  uint64_t surfbits = p->gid & ~((UINT64_C(1) << HR_GID_PATH_BITS) - 1);
+  uint64_t heap = p->gid & ((UINT64_C(1) << HR_GID_PATH_BITS) - 1);
+  for (int k = 0; k < 4; k++) {
+    hr_elem *e = &s->el[first + k];
+    memset(e, 0, sizeof *e);
+    e->gid = surfbits | (heap * 4 + (uint64_t)k);
+    e->surf = p->surf;
+    e->parent = idx;
+    e->child = -1;
+    e->depth = p->depth + 1;
+    memcpy(e->lat, ch[k], sizeof e->lat);
+    elem_geometry(s->scene, e);
+    for (int c = 0; c < 3; c++) {
+      s->B[first + k][c] = s->B[idx][c];
+      s->G[first + k][c] = 0;
+    }
+  }
+  p->child = first;
+  s->nel += 4;
+  return HR_OK;
+}
+
+hr_vec3 hr_elem_point(const hr_solver *s, const hr_elem *e, double u, double v) {
+  if (s->scene->surfs[e->surf].nverts == 4) {
+    hr_vec3 a = v3_lerp(e->p[0], e->p[1], u), b = v3_lerp(e->p[3], e->p[2], u);
+    return v3_lerp(a, b, v);
+  }
+  if (u + v > 1) {
+    u = 1 - u;
+    v = 1 - v;
+  }
+  return v3_add(e->p[0], v3_add(v3_scale(v3_sub(e->p[1], e->p[0]), u),
+                                v3_scale(v3_sub(e->p[2], e->p[0]), v)));
+}
+
+double hr_elem_rho_max(const hr_solver *s, const hr_elem *e) {
+  const double *r = s->scene->mats[s->scene->surfs[e->surf].material].rho;
+  double m = r[0] > r[1] ? r[0] : r[1];
+  return m > r[2] ? m : r[2];
+}

@@ -1,0 +1,380 @@
+/* link.c: the link graph. Initial linking of every pair of mutually facing surfaces with a
+ * shaft-culled candidate blocker list (paper 2.2.1, step {1} of Figure 3) and BF refinement of
+ * links (paper 2.2.2, steps {7..13}).
+ *
+ * Refinement runs in rounds so that it is parallel and independent of scheduling: in a round
+ * every active link decides (keep / split receiver / split source) from the current state only;
+ * the elements to split are subdivided in link order; then each split link writes its four
+ * children into slots fixed by a prefix sum. Children inherit their parent's candidate list and
+ * shrink it to their own shaft; links whose elements face away get F = 0. The children become the
+ * next round's active links, until no link splits. */
+#include "solver_impl.h"
+#include "vec.h"
+
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ---------------------------------------------------------------- growable arrays */
+
+static int links_reserve(hr_solver *s, int64_t need) {
+  if (need <= s->cap_links) return 1;
+  int64_t nc = s->cap_links ? s->cap_links : 1024;
+  while (nc < need) nc *= 2;
+  hr_link *l = realloc(s->links, (size_t)nc * sizeof *l);
+  if (!l) return 0;
+  s->links = l;
+  s->cap_links = nc;
+  return 1;
+}
+
+static int pool_reserve(int32_t **pool, int64_t *cap, int64_t need) {
+  if (need <= *cap) return 1;
+  int64_t nc = *cap ? *cap : 1024;
+  while (nc < need) nc *= 2;
+  int32_t *p = realloc(*pool, (size_t)nc * sizeof *p);
+  if (!p) return 0;
+  *pool = p;
+  *cap = nc;
+  return 1;
+}
+
+/* ---------------------------------------------------------------- link evaluation */
+
+/* Fills F and H of link 'l' (receiver, source and candidate list already set). */
+static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64_t *rays) {
+  const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
+  double f = hr_ff_unoccluded(s, r, j);
+  double h = 1.0;
+  if (f > 0) h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, rays);
+  l->H = (float)h;
+  l->F = (float)(f * h);
+}
+
+/* Refinement oracle: the largest energy, relative to the brightest emitter, that the link would
+ * carry into its receiver (rho_i B_j F_ij per channel). When the elements' centres face away but
+ * parts of them may still face each other, the cosines are bounded by 1 so that such a link
+ * still refines instead of silently dropping its energy. */
+static double link_bf(const hr_solver *s, const hr_link *l) {
+  const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
+  const double *rho = s->scene->mats[s->scene->surfs[r->surf].material].rho;
+  double f = l->F;
+  if (f == 0 && l->H > 0) {
+    double r2 = v3_dot(v3_sub(j->c, r->c), v3_sub(j->c, r->c));
+    f = l->H * j->area / (M_PI * r2 + j->area);
+  }
+  double m = 0;
+  for (int c = 0; c < 3; c++) {
+    double e = rho[c] * s->B[l->s][c];
+    m = e > m ? e : m;
+  }
+  return m * f / s->emax;
+}
+
+/* 1 if some vertex of 'b' lies in front of the plane of 'a' (by more than a relative tolerance). */
+static int in_front(const hr_surface *a, const hr_surface *b) {
+  double size = sqrt(a->area + b->area);
+  for (int k = 0; k < b->nverts; k++)
+    if (v3_dot(v3_sub(b->v[k], a->v[0]), a->normal) > 1e-9 * size) return 1;
+  return 0;
+}
+
+/* ---------------------------------------------------------------- initial linking */
+
+typedef struct row {
+  hr_link *links;
+  int nlinks, cap;
+  int32_t *cand;
+  int ncand, capc;
+  int64_t rays;
+  int err;
+} row;
+
+hr_status hr_link_init(hr_solver *s, hr_err *err) {
+  const hr_scene *sc = s->scene;
+  int n = sc->nsurfs;
+  double pairs = 0.5 * (double)n * (double)(n - 1);
+  if (s->opt.max_links > 0 && pairs > s->opt.max_links)
+    return hr_err_set(err, HR_ERR_TOO_BIG,
+                      "%d surfaces make %.3g surface pairs for initial linking, above the limit "
+                      "of %.3g (--max-pairs); hierarchical clustering is needed for scenes this "
+                      "large",
+                      n, pairs, s->opt.max_links);
+  row *rows = calloc((size_t)n, sizeof *rows);
+  if (!rows) return hr_err_set(err, HR_ERR_NOMEM, "out of memory in initial linking");
+  int failed = 0;
+#pragma omp parallel
+  {
+    int32_t *tmp = NULL;
+    int ntmp = 0, captmp = 0;
+#pragma omp for schedule(dynamic, 4)
+    for (int i = 0; i < n; i++) {
+      row *rw = &rows[i];
+      const hr_surface *a = &sc->surfs[i];
+      for (int j = i + 1; j < n; j++) {
+        const hr_surface *b = &sc->surfs[j];
+        if (!in_front(a, b) || !in_front(b, a)) continue;
+        ntmp = 0;
+        if (hr_shaft_candidates(s->shaft, a->v, a->nverts, i, b->v, b->nverts, j, &tmp, &ntmp,
+                                &captmp) != HR_OK) {
+          rw->err = 1;
+          break;
+        }
+        double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
+        double fji = hr_ff_unoccluded(s, &s->el[j], &s->el[i]);
+        double h = hr_ff_visibility(s, &s->el[i], &s->el[j], tmp, ntmp, &rw->rays);
+        /* A pair all of whose k segments are blocked is taken as mutually invisible. */
+        if (h == 0) continue;
+        if (rw->nlinks + 2 > rw->cap) {
+          int nc = rw->cap ? rw->cap * 2 : 16;
+          hr_link *l = realloc(rw->links, (size_t)nc * sizeof *l);
+          if (!l) {
+            rw->err = 1;
+            break;
+          }
+          rw->links = l;
+          rw->cap = nc;
+        }
+        if (rw->ncand + ntmp > rw->capc) {
+          int nc = rw->capc ? rw->capc : 64;
+          while (nc < rw->ncand + ntmp) nc *= 2;
+          int32_t *c = realloc(rw->cand, (size_t)nc * sizeof *c);
+          if (!c) {
+            rw->err = 1;
+            break;
+          }
+          rw->cand = c;
+          rw->capc = nc;
+        }
+        memcpy(rw->cand + rw->ncand, tmp, (size_t)ntmp * sizeof *tmp);
+        /* Both directions share one candidate list (offset relative to the row for now). */
+        hr_link lij = {i, j, (float)(fij * h), (float)h, (uint32_t)rw->ncand, ntmp};
+        hr_link lji = {j, i, (float)(fji * h), (float)h, (uint32_t)rw->ncand, ntmp};
+        rw->links[rw->nlinks++] = lij;
+        rw->links[rw->nlinks++] = lji;
+        rw->ncand += ntmp;
+      }
+    }
+    free(tmp);
+  }
+  int64_t nl = 0, nc = 0;
+  for (int i = 0; i < n; i++) {
+    failed |= rows[i].err;
+    nl += rows[i].nlinks;
+    nc += rows[i].ncand;
+    s->rays += rows[i].rays;
+  }
+  hr_status st = HR_OK;
+  if (failed || !links_reserve(s, nl) || !pool_reserve(&s->pool, &s->cap_pool, nc)) {
+    st = hr_err_set(err, HR_ERR_NOMEM, "out of memory in initial linking");
+  } else {
+    int64_t ol = 0, oc = 0;
+    for (int i = 0; i < n; i++) {
+      for (int k = 0; k < rows[i].nlinks; k++) {
+        hr_link l = rows[i].links[k];
+        l.cand_off += (uint32_t)oc;
+        s->links[ol++] = l;
+      }
+      memcpy(s->pool + oc, rows[i].cand, (size_t)rows[i].ncand * sizeof(int32_t));
+      oc += rows[i].ncand;
+    }
+    s->nlinks = nl;
+    s->npool = nc;
+    s->initial_links = nl;
+  }
+  for (int i = 0; i < n; i++) {
+    free(rows[i].links);
+    free(rows[i].cand);
+  }
+  free(rows);
+  return st;
+}
+
+/* ---------------------------------------------------------------- refinement */
+
+enum { KEEP = 0, SPLIT_R = 1, SPLIT_S = 2 };
+
+static uint8_t decide(const hr_solver *s, const hr_link *l, double bf_e) {
+  if (l->H == 0) return KEEP;
+  if (link_bf(s, l) <= bf_e) return KEEP;
+  const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
+  /* The paper subdivides the larger patch if its area is above A_e. */
+  if (r->area >= j->area) {
+    if (r->area > s->area_min && (r->child >= 0 || r->depth < HR_GID_DEPTH)) return SPLIT_R;
+  } else {
+    if (j->area > s->area_min && (j->child >= 0 || j->depth < HR_GID_DEPTH)) return SPLIT_S;
+  }
+  return KEEP;
+}
+
+/* Element polygon (world corners) for shaft filtering. */
+static int elem_poly(const hr_solver *s, const hr_elem *e, hr_vec3 *p) {
+  int n = s->scene->surfs[e->surf].nverts;
+  for (int k = 0; k < n; k++) p[k] = e->p[k];
+  return n;
+}
+
+hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
+  *nnew = 0;
+  /* 'cur' holds the active links of this round; 'keep' accumulates the final ones. */
+  int64_t ncur = s->nlinks;
+  hr_link *cur = s->links, *keep = NULL, *next = NULL;
+  int64_t nkeep = 0, capkeep = 0;
+  uint8_t *dec = NULL;
+  int64_t *slot = NULL;
+  uint8_t *mark = NULL;
+  int64_t capmark = 0;
+  s->links = NULL;
+  s->cap_links = 0;
+  hr_status st = HR_OK;
+  int64_t rays = 0;
+  while (ncur > 0) {
+    dec = realloc(dec, (size_t)ncur);
+    slot = realloc(slot, (size_t)ncur * sizeof *slot);
+    if (!dec || !slot) goto nomem;
+#pragma omp parallel for schedule(static)
+    for (int64_t i = 0; i < ncur; i++) dec[i] = decide(s, &cur[i], bf_e);
+    /* Subdivide the marked elements in link order (deterministic element indices). */
+    if (capmark < s->nel) {
+      uint8_t *m = realloc(mark, (size_t)s->nel);
+      if (!m) goto nomem;
+      mark = m;
+      capmark = s->nel;
+    }
+    memset(mark, 0, (size_t)s->nel);
+    int64_t nsplit = 0, nchild_cand = 0, nk = 0;
+    for (int64_t i = 0; i < ncur; i++) {
+      if (dec[i] == KEEP) {
+        slot[i] = nk++;
+        continue;
+      }
+      int32_t e = dec[i] == SPLIT_R ? cur[i].r : cur[i].s;
+      if (!mark[e]) {
+        mark[e] = 1;
+        if (hr_elem_subdivide(s, e) != HR_OK) goto nomem;
+      }
+      slot[i] = nsplit++;
+      nchild_cand += 4 * (int64_t)cur[i].ncand;
+    }
+    /* Keep: append in order. */
+    if (nkeep + nk > capkeep) {
+      int64_t nc = capkeep ? capkeep : 1024;
+      while (nc < nkeep + nk) nc *= 2;
+      hr_link *k2 = realloc(keep, (size_t)nc * sizeof *k2);
+      if (!k2) goto nomem;
+      keep = k2;
+      capkeep = nc;
+    }
+    for (int64_t i = 0; i < ncur; i++)
+      if (dec[i] == KEEP) keep[nkeep + slot[i]] = cur[i];
+    nkeep += nk;
+    if (nsplit == 0) break;
+    /* Children: 4 per split link, candidate capacity = parent's count each. */
+    next = malloc((size_t)(4 * nsplit) * sizeof *next);
+    int64_t pool0 = s->npool;
+    if (!next || !pool_reserve(&s->pool, &s->cap_pool, pool0 + nchild_cand)) goto nomem;
+    /* Offsets of each split link's candidate area: prefix sum in link order. */
+    int64_t *coff = malloc((size_t)nsplit * sizeof *coff);
+    if (!coff) goto nomem;
+    {
+      int64_t acc = pool0;
+      for (int64_t i = 0; i < ncur; i++)
+        if (dec[i] != KEEP) {
+          coff[slot[i]] = acc;
+          acc += 4 * (int64_t)cur[i].ncand;
+        }
+    }
+#pragma omp parallel for schedule(dynamic, 64) reduction(+ : rays)
+    for (int64_t i = 0; i < ncur; i++) {
+      if (dec[i] == KEEP) continue;
+      const hr_link *pl = &cur[i];
+      int32_t parent = dec[i] == SPLIT_R ? pl->r : pl->s;
+      int32_t first = s->el[parent].child;
+      for (int k = 0; k < 4; k++) {
+        hr_link *cl = &next[4 * slot[i] + k];
+        cl->r = dec[i] == SPLIT_R ? first + k : pl->r;
+        cl->s = dec[i] == SPLIT_S ? first + k : pl->s;
+        int64_t off = coff[slot[i]] + (int64_t)k * pl->ncand;
+        cl->cand_off = (uint32_t)off;
+        hr_vec3 pa[4], pb[4];
+        int na = elem_poly(s, &s->el[cl->r], pa), nb = elem_poly(s, &s->el[cl->s], pb);
+        cl->ncand = pl->ncand == 0
+                        ? 0
+                        : hr_shaft_filter(s->scene, pa, na, s->el[cl->r].surf, pb, nb,
+                                          s->el[cl->s].surf, s->pool + pl->cand_off,
+                                          pl->ncand, s->pool + off);
+        link_eval(s, s->pool, cl, &rays);
+      }
+    }
+    free(coff);
+    s->npool = pool0 + nchild_cand;
+    *nnew += 4 * nsplit;
+    if (cur != s->links) free(cur);
+    cur = next;
+    next = NULL;
+    ncur = 4 * nsplit;
+  }
+  if (cur && cur != keep) free(cur);
+  cur = NULL;
+  s->links = keep;
+  s->nlinks = nkeep;
+  s->cap_links = capkeep;
+  keep = NULL;
+  s->rays += rays;
+  /* Compact the candidate pool to the lists of the surviving links, in link order. */
+  {
+    int64_t tot = 0;
+    for (int64_t i = 0; i < s->nlinks; i++) tot += s->links[i].ncand;
+    int32_t *np = malloc((size_t)(tot > 0 ? tot : 1) * sizeof *np);
+    if (!np) goto nomem;
+    int64_t o = 0;
+    for (int64_t i = 0; i < s->nlinks; i++) {
+      hr_link *l = &s->links[i];
+      memcpy(np + o, s->pool + l->cand_off, (size_t)l->ncand * sizeof *np);
+      l->cand_off = (uint32_t)o;
+      o += l->ncand;
+    }
+    free(s->pool);
+    s->pool = np;
+    s->npool = tot;
+    s->cap_pool = tot > 0 ? tot : 1;
+  }
+  if (s->npool > (int64_t)UINT32_MAX) goto nomem;
+  free(dec);
+  free(slot);
+  free(mark);
+  return st;
+nomem:
+  free(dec);
+  free(slot);
+  free(mark);
+  free(next);
+  if (cur && cur != keep) free(cur);
+  free(keep);
+  s->links = NULL;
+  s->nlinks = 0;
+  return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
+}
+
+hr_status hr_link_sort(hr_solver *s) {
+  int64_t *st = realloc(s->rstart, (size_t)(s->nel + 1) * sizeof *st);
+  if (!st) return HR_ERR_NOMEM;
+  s->rstart = st;
+  memset(st, 0, (size_t)(s->nel + 1) * sizeof *st);
+  for (int64_t i = 0; i < s->nlinks; i++) st[s->links[i].r + 1]++;
+  for (int64_t e = 0; e < s->nel; e++) st[e + 1] += st[e];
+  hr_link *out = malloc((size_t)(s->nlinks > 0 ? s->nlinks : 1) * sizeof *out);
+  int64_t *fill = malloc((size_t)(s->nel > 0 ? s->nel : 1) * sizeof *fill);
+  if (!out || !fill) {
+    free(out);
+    free(fill);
+    return HR_ERR_NOMEM;
+  }
+  memcpy(fill, st, (size_t)s->nel * sizeof *fill);
+  for (int64_t i = 0; i < s->nlinks; i++) out[fill[s->links[i].r]++] = s->links[i];
+  free(fill);
+  free(s->links);
+  s->links = out;
+  s->cap_links = s->nlinks > 0 ? s->nlinks : 1;
+  return HR_OK;
+}

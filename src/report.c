@@ -1,0 +1,81 @@
+/* report.c: surfaces.csv, stats.json and the per-phase timing table (paper 2.3, tables 1-2:
+ * init graph, refine, push-pull, sum). The paper's "refine" column covers steps {7..13}, which
+ * include do_link; here it is split into refine (subdivision and visibility) and gather. */
+#include "report.h"
+
+#include <errno.h>
+#include <string.h>
+
+static hr_status open_out(const char *path, FILE **f, hr_err *err) {
+  *f = fopen(path, "w");
+  if (!*f) return hr_err_set(err, HR_ERR_IO, "%s: cannot write: %s", path, strerror(errno));
+  return HR_OK;
+}
+
+static hr_status close_out(const char *path, FILE *f, hr_err *err) {
+  int bad = ferror(f);
+  if (fclose(f) != 0 || bad)
+    return hr_err_set(err, HR_ERR_IO, "%s: write failed: %s", path, strerror(errno));
+  return HR_OK;
+}
+
+hr_status hr_report_csv(const char *path, const hr_solver *s, hr_err *err) {
+  FILE *f;
+  hr_status st = open_out(path, &f, err);
+  if (st != HR_OK) return st;
+  const hr_scene *sc = hr_solver_scene(s);
+  fprintf(f, "id,area,r,g,b\n");
+  for (int p = 0; p < sc->npolys; p++) {
+    double b[3];
+    hr_solver_poly_radiosity(s, p, b);
+    fprintf(f, "%d,%.9g,%.9g,%.9g,%.9g\n", p, sc->poly_area[p], b[0], b[1], b[2]);
+  }
+  return close_out(path, f, err);
+}
+
+hr_status hr_report_json(const char *path, const hr_solver *s, const hr_options *o,
+                         hr_err *err) {
+  FILE *f;
+  hr_status st = open_out(path, &f, err);
+  if (st != HR_OK) return st;
+  hr_stats t;
+  hr_solver_stats(s, &t);
+  const hr_scene *sc = hr_solver_scene(s);
+  fprintf(f, "{\n");
+  fprintf(f, "  \"scene\": \"%s\",\n", sc->name);
+  fprintf(f, "  \"surfaces\": %d,\n", t.npolys);
+  fprintf(f, "  \"split_surfaces\": %d,\n", t.nsurfaces);
+  fprintf(f, "  \"elements\": %lld,\n", (long long)t.elements);
+  fprintf(f, "  \"elements_all\": %lld,\n", (long long)t.elements_all);
+  fprintf(f, "  \"links\": %lld,\n", (long long)t.links);
+  fprintf(f, "  \"initial_links\": %lld,\n", (long long)t.initial_links);
+  fprintf(f, "  \"iterations\": %d,\n", t.iterations);
+  fprintf(f, "  \"rays\": %lld,\n", (long long)t.rays);
+  fprintf(f, "  \"converged\": %s,\n", t.converged ? "true" : "false");
+  fprintf(f, "  \"threads\": %d,\n", t.threads);
+  fprintf(f, "  \"peak_rss_mb\": %.1f,\n", t.peak_rss_mb);
+  fprintf(f, "  \"links_per_s\": %.0f,\n", t.time_s.total > 0 ? t.links / t.time_s.total : 0);
+  fprintf(f, "  \"rays_per_s\": %.0f,\n", t.time_s.total > 0 ? t.rays / t.time_s.total : 0);
+  fprintf(f,
+          "  \"options\": {\"bf_low\": %g, \"bf_start\": %g, \"bf_factor\": %g, "
+          "\"area_min\": %g, \"b_eps\": %g, \"b_max\": %g, \"relax\": %s, \"rays\": %d, "
+          "\"seed\": %llu},\n",
+          o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max,
+          o->relax ? "true" : "false", o->rays, (unsigned long long)o->seed);
+  fprintf(f,
+          "  \"time_s\": {\"init_graph\": %.6f, \"refine\": %.6f, \"gather\": %.6f, "
+          "\"push_pull\": %.6f, \"total\": %.6f}\n",
+          t.time_s.init_graph, t.time_s.refine, t.time_s.gather, t.time_s.push_pull,
+          t.time_s.total);
+  fprintf(f, "}\n");
+  return close_out(path, f, err);
+}
+
+void hr_report_table(FILE *f, const hr_stats *t) {
+  fprintf(f, "%7s %10s %10s %10s %10s %10s %9s %9s %11s %11s\n", "threads", "init graph",
+          "refine", "gather", "push-pull", "sum", "elements", "links", "rays", "links/s");
+  fprintf(f, "%7d %10.3f %10.3f %10.3f %10.3f %10.3f %9lld %9lld %11lld %11.0f\n", t->threads,
+          t->time_s.init_graph, t->time_s.refine, t->time_s.gather, t->time_s.push_pull,
+          t->time_s.total, (long long)t->elements, (long long)t->links, (long long)t->rays,
+          t->time_s.total > 0 ? t->links / t->time_s.total : 0);
+}

@@ -1,0 +1,282 @@
+/* solve.c: the algorithm of the paper's Figure 3. Multigridding over a decreasing BF_e schedule
+ * ({2}, {17}, {18}), the inner loop of refinement ({7..13}), gathering through the links
+ * (do_link, {12}) and push-pull ({14}, paper 2.2.3), with the relaxed inner loop of section
+ * 2.2.4 as an option, and a per-iteration callback for display ({15}).
+ *
+ * Iteration is Jacobi-style: every gather reads the radiosities of the previous push-pull, and
+ * sums over a receiver's links in a fixed order, so results do not depend on thread count or
+ * scheduling. */
+#include "solver_impl.h"
+#include "vec.h"
+
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/resource.h>
+#include <time.h>
+
+double hr_now(void) {
+  struct timespec ts;
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return (double)ts.tv_sec + 1e-9 * (double)ts.tv_nsec;
+}
+
+void hr_options_default(hr_options *o) {
+  memset(o, 0, sizeof *o);
+  o->bf_low = 2e-4;
+  o->bf_start = 0.05;
+  o->bf_factor = 4.0;
+  o->area_min = 1e-4;
+  o->b_eps = 1e-4;
+  o->b_max = 2e-3;
+  o->relax = 1;
+  o->relax_links = 5;
+  o->rays = 16;
+  o->seed = 1;
+  o->threads = 0;
+  o->max_iters = 1000;
+  o->max_links = 5e7;
+}
+
+static hr_status check_options(const hr_options *o, hr_err *err) {
+  if (!(o->bf_low > 0)) return hr_err_set(err, HR_ERR_INVALID, "--bf-low must be > 0");
+  if (!(o->bf_start >= o->bf_low))
+    return hr_err_set(err, HR_ERR_INVALID, "--bf-start must be >= --bf-low");
+  if (!(o->bf_factor > 1)) return hr_err_set(err, HR_ERR_INVALID, "--bf-factor must be > 1");
+  if (!(o->area_min > 0 && o->area_min < 1))
+    return hr_err_set(err, HR_ERR_INVALID, "--area-min must be in (0, 1)");
+  if (!(o->b_eps > 0)) return hr_err_set(err, HR_ERR_INVALID, "--b-eps must be > 0");
+  if (!(o->b_max >= o->b_eps)) return hr_err_set(err, HR_ERR_INVALID, "--b-max must be >= --b-eps");
+  if (o->rays < 1 || o->rays > 4096)
+    return hr_err_set(err, HR_ERR_INVALID, "--rays must be in 1..4096");
+  if (o->threads < 0) return hr_err_set(err, HR_ERR_INVALID, "--threads must be >= 0");
+  if (o->max_iters < 1) return hr_err_set(err, HR_ERR_INVALID, "--max-iters must be >= 1");
+  return HR_OK;
+}
+
+hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solver **out,
+                           hr_err *err) {
+  *out = NULL;
+  hr_options o;
+  if (opt)
+    o = *opt;
+  else
+    hr_options_default(&o);
+  hr_status st = check_options(&o, err);
+  if (st != HR_OK) return st;
+  if (scene->nsurfs == 0) return hr_err_set(err, HR_ERR_INVALID, "scene has no surfaces");
+  double emax = hr_scene_max_emit(scene);
+  if (!(emax > 0))
+    return hr_err_set(err, HR_ERR_NO_EMITTER,
+                      "%s: scene has no emitting surface (give a material Ke, or use --emit)",
+                      scene->name);
+  hr_solver *s = calloc(1, sizeof *s);
+  if (!s) return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  s->scene = scene;
+  s->opt = o;
+  s->emax = emax;
+  s->area_total = hr_scene_total_area(scene);
+  s->area_min = o.area_min * s->area_total;
+  s->threads = o.threads > 0 ? o.threads : omp_get_num_procs();
+  if ((st = hr_elem_init(s)) != HR_OK) {
+    hr_solver_destroy(&s);
+    return hr_err_set(err, st, "out of memory");
+  }
+  *out = s;
+  return HR_OK;
+}
+
+void hr_solver_destroy(hr_solver **ps) {
+  if (!ps || !*ps) return;
+  hr_solver *s = *ps;
+  hr_vis_destroy(&s->vis);
+  hr_shaft_index_destroy(&s->shaft);
+  free(s->el);
+  free(s->B);
+  free(s->G);
+  free(s->links);
+  free(s->pool);
+  free(s->rstart);
+  free(s);
+  *ps = NULL;
+}
+
+/* do_link for every link, grouped by receiver: G_i = sum_j F_ij B_j (previous B). */
+static void gather(hr_solver *s) {
+#pragma omp parallel for schedule(dynamic, 256)
+  for (int64_t e = 0; e < s->nel; e++) {
+    double g0 = 0, g1 = 0, g2 = 0;
+    for (int64_t k = s->rstart[e]; k < s->rstart[e + 1]; k++) {
+      const hr_link *l = &s->links[k];
+      const double *b = s->B[l->s];
+      double f = l->F;
+      g0 += f * b[0];
+      g1 += f * b[1];
+      g2 += f * b[2];
+    }
+    s->G[e][0] = g0;
+    s->G[e][1] = g1;
+    s->G[e][2] = g2;
+  }
+}
+
+/* Push 'down' (gathered at ancestors) to the leaves, pull area-weighted B back up. Writes the new
+ * B of 'idx' into 'bout' and returns the largest change of B over leaves below. Reads the
+ * previous B of the element before overwriting it. */
+static double pushpull(hr_solver *s, int32_t idx, const double down[3], double bout[3]) {
+  const hr_elem *e = &s->el[idx];
+  const hr_material *m = &s->scene->mats[s->scene->surfs[e->surf].material];
+  double g[3] = {down[0] + s->G[idx][0], down[1] + s->G[idx][1], down[2] + s->G[idx][2]};
+  double change = 0, b[3];
+  if (e->child < 0) {
+    for (int c = 0; c < 3; c++) {
+      b[c] = m->emit[c] + m->rho[c] * g[c];
+      double d = fabs(b[c] - s->B[idx][c]);
+      change = d > change ? d : change;
+    }
+  } else {
+    double acc[3] = {0, 0, 0}, area = 0;
+    for (int k = 0; k < 4; k++) {
+      double bc[3];
+      int32_t ci = e->child + k;
+      double d = pushpull(s, ci, g, bc);
+      change = d > change ? d : change;
+      double a = s->el[ci].area;
+      area += a;
+      for (int c = 0; c < 3; c++) acc[c] += a * bc[c];
+    }
+    for (int c = 0; c < 3; c++) b[c] = acc[c] / area;
+  }
+  for (int c = 0; c < 3; c++) s->B[idx][c] = bout[c] = b[c];
+  return change;
+}
+
+static double push_pull_all(hr_solver *s) {
+  double maxc = 0;
+  int n = s->scene->nsurfs;
+#pragma omp parallel for schedule(dynamic, 8) reduction(max : maxc)
+  for (int i = 0; i < n; i++) {
+    double zero[3] = {0, 0, 0}, b[3];
+    double d = pushpull(s, i, zero, b);
+    maxc = d > maxc ? d : maxc;
+  }
+  return maxc / s->emax;
+}
+
+static int64_t count_leaves(const hr_solver *s) {
+  int64_t n = 0;
+  for (int64_t e = 0; e < s->nel; e++) n += s->el[e].child < 0;
+  return n;
+}
+
+hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
+  hr_status st;
+  omp_set_num_threads(s->threads);
+  s->t_start = hr_now();
+  double t0 = s->t_start;
+  if (!s->vis && (st = hr_vis_create(s->scene, &s->vis, err)) != HR_OK) return st;
+  if (!s->shaft && (st = hr_shaft_index_create(s->scene, &s->shaft)) != HR_OK)
+    return hr_err_set(err, st, "cannot build the shaft-culling hierarchy");
+  if ((st = hr_link_init(s, err)) != HR_OK) return st;
+  double t1 = hr_now();
+  s->t.init_graph = t1 - t0;
+  const hr_options *o = &s->opt;
+  double bf_e = o->bf_start;
+  s->converged = 0;
+  int stop = 0;
+  for (;;) { /* {3}..{18}: multigrid levels */
+    int at_low = bf_e <= o->bf_low * (1 + 1e-12);
+    for (;;) { /* {4}..{16}: inner loop */
+      double ta = hr_now();
+      int64_t nnew = 0;
+      if ((st = hr_link_refine(s, bf_e, &nnew, err)) != HR_OK) return st;
+      if ((st = hr_link_sort(s)) != HR_OK) return hr_err_set(err, st, "out of memory");
+      double tb = hr_now();
+      gather(s);
+      double tc = hr_now();
+      double change = push_pull_all(s);
+      double td = hr_now();
+      s->t.refine += tb - ta;
+      s->t.gather += tc - tb;
+      s->t.push_pull += td - tc;
+      s->iterations++;
+      if (cb) {
+        hr_iter_info info = {s->iterations, bf_e, count_leaves(s), s->nlinks, change,
+                             hr_now() - s->t_start};
+        if (cb(ud, s, &info)) stop = 1;
+      }
+      /* Strict convergence ({16}, and {18} at BF_low): B settled and no link refined. */
+      int strict = change < o->b_eps && nnew == 0;
+      int level_done = strict;
+      if (o->relax && !at_low) {
+        /* Section 2.2.4: at an intermediate level, a change below B_max counts as approximately
+         * converged once the links settle, or at once while many new links still appear (the
+         * next, lower BF_e will refine them anyway). */
+        int many = (double)nnew * 100.0 >= (double)o->relax_links * (double)s->nlinks;
+        level_done = change < o->b_max && (nnew == 0 || many);
+      }
+      if (level_done || stop || s->iterations >= o->max_iters) {
+        if (at_low && strict) s->converged = 1;
+        break;
+      }
+    }
+    if (stop || s->iterations >= o->max_iters || at_low) break;
+    bf_e = bf_e / o->bf_factor;
+    if (bf_e < o->bf_low) bf_e = o->bf_low;
+  }
+  s->t.total = hr_now() - s->t_start;
+  return HR_OK;
+}
+
+void hr_solver_stats(const hr_solver *s, hr_stats *st) {
+  memset(st, 0, sizeof *st);
+  st->nsurfaces = s->scene->nsurfs;
+  st->npolys = s->scene->npolys;
+  st->elements = count_leaves(s);
+  st->elements_all = s->nel;
+  st->links = s->nlinks;
+  st->initial_links = s->initial_links;
+  st->iterations = s->iterations;
+  st->rays = s->rays;
+  st->converged = s->converged;
+  st->threads = s->threads;
+  struct rusage ru;
+  if (getrusage(RUSAGE_SELF, &ru) == 0) st->peak_rss_mb = (double)ru.ru_maxrss / 1024.0;
+  st->time_s = s->t;
+}
+
+void hr_solver_poly_radiosity(const hr_solver *s, int poly, double rgb[3]) {
+  const hr_scene *sc = s->scene;
+  double acc[3] = {0, 0, 0}, area = 0;
+  for (int i = 0; i < sc->nsurfs; i++) {
+    if (sc->surfs[i].poly != poly) continue;
+    double a = s->el[i].area;
+    area += a;
+    for (int c = 0; c < 3; c++) acc[c] += a * s->B[i][c];
+  }
+  for (int c = 0; c < 3; c++) rgb[c] = area > 0 ? acc[c] / area : 0;
+}
+
+hr_status hr_solver_leaves(const hr_solver *s, hr_leaf **leaves, int64_t *nleaves) {
+  int64_t n = count_leaves(s);
+  hr_leaf *L = malloc((size_t)(n > 0 ? n : 1) * sizeof *L);
+  if (!L) return HR_ERR_NOMEM;
+  int64_t k = 0;
+  for (int64_t e = 0; e < s->nel; e++) {
+    const hr_elem *el = &s->el[e];
+    if (el->child >= 0) continue;
+    hr_leaf *l = &L[k++];
+    memset(l, 0, sizeof *l);
+    l->surf = el->surf;
+    l->nverts = s->scene->surfs[el->surf].nverts;
+    memcpy(l->lat, el->lat, sizeof l->lat);
+    memcpy(l->p, el->p, sizeof l->p);
+    l->area = el->area;
+    for (int c = 0; c < 3; c++) l->B[c] = s->B[e][c];
+  }
+  *leaves = L;
+  *nleaves = n;
+  return HR_OK;
+}
+
+const hr_scene *hr_solver_scene(const hr_solver *s) { return s->scene; }

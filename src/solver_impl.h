@@ -1,0 +1,95 @@
+/* solver_impl.h: the solver's internal data model (paper 2.2: the patch/link graph).
+ *
+ * Elements (patches) are nodes of per-surface quadtrees kept in growable arrays and referred to by
+ * index ('idx'); each also has a stable global id ('gid') computed from its surface and its path
+ * in the tree, so that a later distributed version can name an element on any process. Geometry
+ * is a pure function of (surface, lattice corners); radiosity state lives in separate arrays.
+ * Links are an array of (receiver, source, F, H, candidate list) records; candidate lists are
+ * ranges of one int32 pool. Nothing here is a pointer graph. */
+#ifndef HR_SOLVER_IMPL_H
+#define HR_SOLVER_IMPL_H
+
+#include "hrad.h"
+#include "vis.h"
+
+#include <stdint.h>
+
+/* Deepest quadtree level: a gid holds the surface in its top 23 bits and the path as a heap index
+ * (1 sentinel bit + 2 bits per level) in the low 41 bits. */
+#define HR_GID_DEPTH 20
+#define HR_GID_PATH_BITS 41
+
+typedef struct hr_elem {
+  uint64_t gid;
+  int32_t surf;
+  int32_t parent; /* idx, -1 at the root */
+  int32_t child;  /* idx of the first of 4 consecutive children, -1 for a leaf */
+  int32_t depth;
+  uint32_t lat[4][2];
+  hr_vec3 p[4];   /* world corners (p[3] unused for triangles) */
+  hr_vec3 c;      /* centroid */
+  double area;
+} hr_elem;
+
+typedef struct hr_link {
+  int32_t r, s;       /* receiver and source element idx */
+  float F;            /* form factor of eq. (2) times H */
+  float H;            /* visible fraction */
+  uint32_t cand_off;  /* candidate blockers: pool[cand_off .. cand_off+ncand) */
+  int32_t ncand;
+} hr_link;
+
+struct hr_solver {
+  const hr_scene *scene;
+  hr_options opt;
+  hr_vis *vis;
+  hr_shaft_index *shaft;
+  double emax;        /* largest emitted radiosity: the unit of BF_e and B_e */
+  double area_total;
+  double area_min;    /* A_e in scene units */
+  /* elements */
+  hr_elem *el;
+  int64_t nel, cap_el;
+  double (*B)[3];     /* radiosity per element */
+  double (*G)[3];     /* gathered (irradiance-like, before rho) per element */
+  /* links, sorted by receiver after each refinement; rstart[idx]..rstart[idx+1] */
+  hr_link *links;
+  int64_t nlinks, cap_links;
+  int32_t *pool;
+  int64_t npool, cap_pool;
+  int64_t *rstart;    /* [nel+1], valid after hr_link_sort */
+  /* counters */
+  int64_t rays, initial_links;
+  int iterations, converged, threads;
+  hr_timing t;
+  double t_start;
+};
+
+/* elem.c */
+hr_status hr_elem_init(hr_solver *s);                  /* one root per surface, idx == surface */
+hr_status hr_elem_subdivide(hr_solver *s, int32_t idx); /* creates 4 children if a leaf */
+/* Point on element 'e' at parameters (u, v) in [0,1)^2 (triangles fold the square). */
+hr_vec3 hr_elem_point(const hr_solver *s, const hr_elem *e, double u, double v);
+double hr_elem_rho_max(const hr_solver *s, const hr_elem *e);
+
+/* ff.c */
+/* Unoccluded point-to-disk form factor of eq. (2) from receiver r to source j (source area A_j in
+ * the denominator); 0 when the elements face away at their centres. */
+double hr_ff_unoccluded(const hr_solver *s, const hr_elem *r, const hr_elem *j);
+/* Visible fraction H between elements a and b with candidate list 'cand' (0 candidates: 1, no
+ * rays). Symmetric: H(a,b) == H(b,a) exactly. Adds the number of rays cast to *rays. */
+double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
+                        const int32_t *cand, int ncand, int64_t *rays);
+/* Counter-based hash of (seed, a, b, i): the only source of randomness. */
+uint64_t hr_hash4(uint64_t seed, uint64_t a, uint64_t b, uint64_t i);
+
+/* link.c */
+hr_status hr_link_init(hr_solver *s, hr_err *err);          /* paper 2.2.1 */
+/* One refinement pass at threshold 'bf_e' (relative); returns new link count through 'nnew'. */
+hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err); /* 2.2.2 */
+hr_status hr_link_sort(hr_solver *s); /* groups links by receiver, fills rstart */
+
+/* solve.c */
+double hr_now(void);
+
+#endif
