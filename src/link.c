@@ -103,7 +103,7 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
   row *rows = calloc((size_t)n, sizeof *rows);
   if (!rows) return hr_err_set(err, HR_ERR_NOMEM, "out of memory in initial linking");
   int failed = 0;
-#pragma omp parallel
+#pragma omp parallel if (n > 16)
   {
     int32_t *tmp = NULL;
     int ntmp = 0, captmp = 0;
@@ -216,6 +216,12 @@ static int elem_poly(const hr_solver *s, const hr_elem *e, hr_vec3 *p) {
 
 hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
   *nnew = 0;
+  /* Most iterations split nothing: find out first, without copying the graph. */
+  int any = 0;
+#pragma omp parallel for schedule(static) reduction(| : any) if (s->nlinks > PAR_MIN)
+  for (int64_t i = 0; i < s->nlinks; i++) any |= decide(s, &s->links[i], bf_e) != KEEP;
+  if (!any) return HR_OK;
+  s->sorted = 0;
   /* 'cur' holds the active links of this round; 'keep' accumulates the final ones. */
   int64_t ncur = s->nlinks;
   hr_link *cur = s->links, *keep = NULL, *next = NULL;
@@ -232,7 +238,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     dec = realloc(dec, (size_t)ncur);
     slot = realloc(slot, (size_t)ncur * sizeof *slot);
     if (!dec || !slot) goto nomem;
-#pragma omp parallel for schedule(static)
+#pragma omp parallel for schedule(static) if (ncur > PAR_MIN)
     for (int64_t i = 0; i < ncur; i++) dec[i] = decide(s, &cur[i], bf_e);
     /* Subdivide the marked elements in link order (deterministic element indices). */
     if (capmark < s->nel) {
@@ -284,7 +290,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
           acc += 4 * (int64_t)cur[i].ncand;
         }
     }
-#pragma omp parallel for schedule(dynamic, 64) reduction(+ : rays)
+#pragma omp parallel for schedule(dynamic, 64) reduction(+ : rays) if (nsplit > 16)
     for (int64_t i = 0; i < ncur; i++) {
       if (dec[i] == KEEP) continue;
       const hr_link *pl = &cur[i];
@@ -357,6 +363,7 @@ nomem:
 }
 
 hr_status hr_link_sort(hr_solver *s) {
+  if (s->sorted) return HR_OK;
   int64_t *st = realloc(s->rstart, (size_t)(s->nel + 1) * sizeof *st);
   if (!st) return HR_ERR_NOMEM;
   s->rstart = st;
@@ -376,5 +383,6 @@ hr_status hr_link_sort(hr_solver *s) {
   free(s->links);
   s->links = out;
   s->cap_links = s->nlinks > 0 ? s->nlinks : 1;
+  s->sorted = 1;
   return HR_OK;
 }

@@ -198,10 +198,13 @@ hr_status hr_scene_add_polygon(hr_scene *s, const hr_vec3 *v, int n, int materia
   }
   if (st != HR_OK) return st;
   if (added == 0) return HR_OK;
-  int cap = s->npolys; /* poly_area grows in step with npolys */
-  double *pa = realloc(s->poly_area, (size_t)(cap + 1) * sizeof *pa);
-  if (!pa) return HR_ERR_NOMEM;
-  s->poly_area = pa;
+  /* poly_area doubles whenever npolys reaches a power of two (its capacity). */
+  int np = s->npolys;
+  if (np == 0 || (np & (np - 1)) == 0) {
+    double *pa = realloc(s->poly_area, (size_t)(np ? 2 * np : 1) * sizeof *pa);
+    if (!pa) return HR_ERR_NOMEM;
+    s->poly_area = pa;
+  }
   double area = 0;
   for (int i = s->nsurfs - added; i < s->nsurfs; i++) area += s->surfs[i].area;
   s->poly_area[s->npolys++] = area;

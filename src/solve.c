@@ -23,7 +23,7 @@ double hr_now(void) {
 
 void hr_options_default(hr_options *o) {
   memset(o, 0, sizeof *o);
-  o->bf_low = 2e-4;
+  o->bf_low = 1e-3;
   o->bf_start = 0.05;
   o->bf_factor = 4.0;
   o->area_min = 1e-4;
@@ -103,7 +103,7 @@ void hr_solver_destroy(hr_solver **ps) {
 
 /* do_link for every link, grouped by receiver: G_i = sum_j F_ij B_j (previous B). */
 static void gather(hr_solver *s) {
-#pragma omp parallel for schedule(dynamic, 256)
+#pragma omp parallel for schedule(dynamic, 256) if (s->nlinks > PAR_MIN)
   for (int64_t e = 0; e < s->nel; e++) {
     double g0 = 0, g1 = 0, g2 = 0;
     for (int64_t k = s->rstart[e]; k < s->rstart[e + 1]; k++) {
@@ -154,7 +154,7 @@ static double pushpull(hr_solver *s, int32_t idx, const double down[3], double b
 static double push_pull_all(hr_solver *s) {
   double maxc = 0;
   int n = s->scene->nsurfs;
-#pragma omp parallel for schedule(dynamic, 8) reduction(max : maxc)
+#pragma omp parallel for schedule(dynamic, 8) reduction(max : maxc) if (s->nel > PAR_MIN)
   for (int i = 0; i < n; i++) {
     double zero[3] = {0, 0, 0}, b[3];
     double d = pushpull(s, i, zero, b);

@@ -19,6 +19,9 @@
 #define HR_GID_DEPTH 20
 #define HR_GID_PATH_BITS 41
 
+/* Loops shorter than this run on one thread: a parallel region costs more than the work. */
+#define PAR_MIN 20000
+
 typedef struct hr_elem {
   uint64_t gid;
   int32_t surf;
@@ -57,7 +60,8 @@ struct hr_solver {
   int64_t nlinks, cap_links;
   int32_t *pool;
   int64_t npool, cap_pool;
-  int64_t *rstart;    /* [nel+1], valid after hr_link_sort */
+  int64_t *rstart;    /* [nel+1], valid after hr_link_sort while 'sorted' */
+  int sorted;
   /* counters */
   int64_t rays, initial_links;
   int iterations, converged, threads;

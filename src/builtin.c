@@ -1,0 +1,629 @@
+/* builtin.c: the built-in scenes, built from code so that runs, tests and benchmarks need no
+ * files (paper section 2.3: the "room" of Figure 4, the "floor" of Figure 5, the ~4000-polygon
+ * museum of Figures 8-11), plus the Cornell box as a community reference. Units are metres, y is
+ * up, every polygon is counter-clockwise seen from its front (light leaves the front only), every
+ * surface faces into the air that the light is in, and every scene is deterministic and carries
+ * a camera.
+ *
+ *   room     A furnished room, 5 x 2.8 x 4 m (x, y, z), of exactly 27 polygons (Figure 4): floor,
+ *            ceiling, four walls (the x = 0 wall red for colour bleeding), a 1.2 x 1 m ceiling
+ *            light 1 cm below the ceiling (E = 100, 96, 88 W/m^2), a table, a cabinet, a
+ *            two-block sofa, a picture, a door and a rug. Camera in a corner near the sofa.
+ *   floor    12 such rooms in a 4 x 3 grid (Figure 5), 292 polygons (the paper's has 289),
+ *            20.75 x 12.5 m: the walls between rooms are 0.25 m thick (each room has its own
+ *            inward-facing wall; the gap between the two faces is solid). Door openings
+ *            (0.9 x 2.1 m: left, right and lintel pieces on both sides, two jambs, a soffit and a
+ *            threshold in the gap) join every room to its x neighbours and the rows in a snake,
+ *            11 doors for one connected floor. Each room has its own light and a differently
+ *            coloured accent wall; rooms alternate between two furniture sets. Camera in room
+ *            (0,1) looking along +x through a row of aligned doors.
+ *   museum   A four-storey gallery, 48 x 18 x 30 m, on a 16 x 10 grid of 3 m cells, 4302
+ *            polygons (the paper's Figures 8-11 had about 4000). Each storey is tiled by
+ *            rectangular halls (three to five; the layout changes between storeys), each an
+ *            inward-facing box with 0.3 m walls between halls and 0.4 m slabs between storeys.
+ *            The central hall holds an atrium, open from the ground floor to a skylight, with
+ *            parapets along the upper galleries and interior window openings from the wings.
+ *            Doors (with jambs, soffit and threshold in the wall gap) join the halls; the outer
+ *            walls have windows and, on the ground floor, glass entrance doors (emitters,
+ *            E = 40, 44, 52). Ceiling lamps (80, 76, 68), skylights over the atrium and the top
+ *            wings (55, 60, 70), plinths, free-standing display walls and benches. Floors and
+ *            ceilings are one polygon per cell and walls one panel per cell, so no polygon is
+ *            larger than 3 x 4.3 m and no aspect ratio exceeds 9. Camera on the first-floor
+ *            gallery behind the parapet, looking across and down the atrium.
+ *   cornell  The Cornell box from the Cornell Program of Computer Graphics' published
+ *            measurements (mm converted to m; the slightly non-planar red wall becomes two
+ *            triangles, so 16 polygons give 17 surfaces), no front wall, McGuire's reflectances and light (E = 17, 12, 4), the
+ *            light 0.1 mm below the ceiling, and the published camera (eye 278, 273, -800 mm,
+ *            looking along +z, 39.3 degree field of view).
+ */
+#include "hrad.h"
+#include "vec.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+/* ---------------------------------------------------------------- building helpers */
+
+/* A scene under construction; the first failure sticks in 'st' and later calls do nothing.
+ * 'bad' counts polygons that did not become surfaces: a bug in this file, reported as one. */
+typedef struct bld {
+  hr_scene *s;
+  hr_status st;
+  int bad;
+} bld;
+
+static int mat(bld *b, const char *name, double r, double g, double bl, double er, double eg,
+               double eb) {
+  if (b->st != HR_OK) return 0;
+  const double rho[3] = {r, g, bl}, e[3] = {er, eg, eb};
+  int idx = 0;
+  b->st = hr_scene_add_material(b->s, name, rho, e, &idx);
+  return idx;
+}
+
+static void poly(bld *b, const hr_vec3 *v, int n, int m) {
+  if (b->st != HR_OK) return;
+  hr_poly_result r;
+  b->st = hr_scene_add_polygon(b->s, v, n, m, &r);
+  if (b->st == HR_OK && r != HR_POLY_ADDED) b->bad++;
+}
+
+static void quad(bld *b, hr_vec3 p0, hr_vec3 p1, hr_vec3 p2, hr_vec3 p3, int m) {
+  const hr_vec3 v[4] = {p0, p1, p2, p3};
+  poly(b, v, 4, m);
+}
+
+/* Face directions: the axis (1 = x, 2 = y, 3 = z) the normal points along, negative for -. */
+enum { XP = 1, YP = 2, ZP = 3, XN = -1, YN = -2, ZN = -3 };
+
+static double comp(hr_vec3 p, int a) { return a == 0 ? p.x : a == 1 ? p.y : p.z; }
+
+static void set_comp(hr_vec3 *p, int a, double v) {
+  if (a == 0)
+    p->x = v;
+  else if (a == 1)
+    p->y = v;
+  else
+    p->z = v;
+}
+
+/* Axis-aligned rectangle with normal 'dir', in the plane through 'lo' perpendicular to the
+ * normal's axis, spanning lo..hi along the two other axes. With the in-plane axes u = a+1 and
+ * v = a+2 (mod 3), u x v is +a, so (u0,v0) (u1,v0) (u1,v1) (u0,v1) faces +a. */
+static void rect(bld *b, int dir, hr_vec3 lo, hr_vec3 hi, int m) {
+  int a = abs(dir) - 1, u = (a + 1) % 3, v = (a + 2) % 3;
+  const double us[4] = {comp(lo, u), comp(hi, u), comp(hi, u), comp(lo, u)};
+  const double vs[4] = {comp(lo, v), comp(lo, v), comp(hi, v), comp(hi, v)};
+  hr_vec3 q[4];
+  for (int k = 0; k < 4; k++) {
+    int idx = dir > 0 ? k : (4 - k) % 4; /* reversed order faces -a */
+    q[k] = lo;
+    set_comp(&q[k], u, us[idx]);
+    set_comp(&q[k], v, vs[idx]);
+  }
+  quad(b, q[0], q[1], q[2], q[3], m);
+}
+
+/* Vertical rectangle with normal 'dir' (+-x or +-z) in the plane at coordinate 'c', spanning
+ * [a0,a1] along the other horizontal axis and [y0,y1] in height. */
+static void vrect(bld *b, int dir, double c, double a0, double a1, double y0, double y1, int m) {
+  if (abs(dir) == 1)
+    rect(b, dir, v3(c, y0, a0), v3(c, y1, a1), m);
+  else
+    rect(b, dir, v3(a0, y0, c), v3(a1, y1, c), m);
+}
+
+/* A rectangular hole in a wall: [h0,h1] along the wall, [y0,y1] in height. */
+typedef struct hole {
+  double h0, h1, y0, y1;
+} hole;
+
+/* Wall face like vrect() with an optional hole: up to four pieces (sill below the hole, the
+ * pieces left and right of it, the lintel above), each only where it has extent. When 'glass'
+ * >= 0 the hole is filled with a quad of that material facing the same way (a window). */
+static void wall(bld *b, int dir, double c, double a0, double a1, double y0, double y1,
+                 const hole *h, int m, int glass) {
+  if (!h) {
+    vrect(b, dir, c, a0, a1, y0, y1, m);
+    return;
+  }
+  if (h->y0 > y0) vrect(b, dir, c, a0, a1, y0, h->y0, m);
+  if (h->h0 > a0) vrect(b, dir, c, a0, h->h0, h->y0, h->y1, m);
+  if (h->h1 < a1) vrect(b, dir, c, h->h1, a1, h->y0, h->y1, m);
+  if (h->y1 < y1) vrect(b, dir, c, a0, a1, h->y1, y1, m);
+  if (glass >= 0) vrect(b, dir, c, h->h0, h->h1, h->y0, h->y1, glass);
+}
+
+/* Box faces for 'mask'; outward normals. The bottom is usually left out: it rests on a floor. */
+enum { F_XN = 1, F_XP = 2, F_YN = 4, F_YP = 8, F_ZN = 16, F_ZP = 32, F_NOBOTTOM = 1 | 2 | 8 | 16 | 32 };
+
+static void box_out(bld *b, hr_vec3 lo, hr_vec3 hi, int m, int mask) {
+  if (mask & F_YP) rect(b, YP, v3(lo.x, hi.y, lo.z), hi, m);
+  if (mask & F_YN) rect(b, YN, lo, v3(hi.x, lo.y, hi.z), m);
+  if (mask & F_XN) rect(b, XN, lo, v3(lo.x, hi.y, hi.z), m);
+  if (mask & F_XP) rect(b, XP, v3(hi.x, lo.y, lo.z), hi, m);
+  if (mask & F_ZN) rect(b, ZN, lo, v3(hi.x, hi.y, lo.z), m);
+  if (mask & F_ZP) rect(b, ZP, v3(lo.x, lo.y, hi.z), hi, m);
+}
+
+static void set_camera(hr_scene *s, hr_vec3 eye, hr_vec3 at, double fov) {
+  s->has_camera = 1;
+  s->camera.eye = eye;
+  s->camera.at = at;
+  s->camera.up = v3(0, 1, 0);
+  s->camera.fov_deg = fov;
+}
+
+/* The gap of a door or window opening through a thick wall: the wall's two faces lie in the
+ * planes 'axis' = c0 and c1 (c0 < c1; axis 0 = x, 2 = z) and both have hole 'h'. Adds the two
+ * jambs, the soffit and the sill (the threshold, for a door), all facing into the opening. */
+static void tunnel(bld *b, int axis, double c0, double c1, const hole *h, int m) {
+  if (axis == 0) {
+    rect(b, ZP, v3(c0, h->y0, h->h0), v3(c1, h->y1, h->h0), m);
+    rect(b, ZN, v3(c0, h->y0, h->h1), v3(c1, h->y1, h->h1), m);
+    rect(b, YN, v3(c0, h->y1, h->h0), v3(c1, h->y1, h->h1), m);
+    rect(b, YP, v3(c0, h->y0, h->h0), v3(c1, h->y0, h->h1), m);
+  } else {
+    rect(b, XP, v3(h->h0, h->y0, c0), v3(h->h0, h->y1, c1), m);
+    rect(b, XN, v3(h->h1, h->y0, c0), v3(h->h1, h->y1, c1), m);
+    rect(b, YN, v3(h->h0, h->y1, c0), v3(h->h1, h->y1, c1), m);
+    rect(b, YP, v3(h->h0, h->y0, c0), v3(h->h1, h->y0, c1), m);
+  }
+}
+
+/* ---------------------------------------------------------------- room and floor */
+
+#define ROOM_W 5.0 /* x */
+#define ROOM_H 2.8 /* y */
+#define ROOM_D 4.0 /* z */
+#define DOOR_H 2.1
+/* Door openings (and the room's door leaf) lie at local x in [0.5,1.4] in the z walls and at
+ * local z in [D-1.4, D-0.5] in the x walls, so furniture never blocks them and the doors of a
+ * row or column line up. */
+#define DOOR_A0 0.5
+#define DOOR_A1 1.4
+#define FLOOR_T 0.25 /* thickness of the walls between the rooms of "floor" */
+
+/* Walls of a room, in polygon order. */
+enum { W_ZLO = 0, W_ZHI, W_XLO, W_XHI };
+
+/* Furniture and decoration of a room. */
+enum {
+  RF_TABLE = 1,   /* 1.6 x 0.9 x 0.75 block: top and four sides (5 polygons) */
+  RF_CABINET = 2, /* against the z = 0 wall: top, front, two sides (4) */
+  RF_SOFA = 4,    /* seat and backrest against the x = W wall (8) */
+  RF_PICTURE = 8, /* 1 cm in front of the x = 0 wall (1) */
+  RF_DOOR = 16,   /* a closed door leaf 1 cm in front of the z = D wall, where "floor" has its
+                     openings (1) */
+  RF_RUG = 32     /* 5 mm above the floor (1) */
+};
+
+typedef struct room_mats {
+  int floor, ceil, wall, accent, light, table, cabinet, sofa, picture, door, rug;
+} room_mats;
+
+/* Door holes of a room with its low corner at (x0, z0): in the z walls (along x) and in the x
+ * walls (along z). */
+static hole room_door_z(double x0) { return (hole){x0 + DOOR_A0, x0 + DOOR_A1, 0, DOOR_H}; }
+static hole room_door_x(double z0) {
+  return (hole){z0 + ROOM_D - DOOR_A1, z0 + ROOM_D - DOOR_A0, 0, DOOR_H};
+}
+
+/* One room (its inside is the box (x0,0,z0)-(x0+W,H,z0+D), all faces inward). Bit w of 'doors'
+ * cuts a door opening into wall w (lintel, left and right pieces instead of one quad). Polygon
+ * order: floor, ceiling, walls (z = 0, z = D, x = 0 (accent), x = W), light, table, cabinet, sofa
+ * seat, backrest, picture, door leaf, rug: for "room" 0, 1, 2-5, 6, 7-11, 12-15, 16-19, 20-23,
+ * 24, 25, 26. */
+static void room(bld *b, double x0, double z0, unsigned doors, unsigned furn,
+                 const room_mats *m) {
+  const double W = ROOM_W, H = ROOM_H, D = ROOM_D;
+  const double x1 = x0 + W, z1 = z0 + D;
+  rect(b, YP, v3(x0, 0, z0), v3(x1, 0, z1), m->floor);
+  rect(b, YN, v3(x0, H, z0), v3(x1, H, z1), m->ceil);
+  const hole hz = room_door_z(x0), hx = room_door_x(z0);
+  wall(b, ZP, z0, x0, x1, 0, H, (doors >> W_ZLO) & 1 ? &hz : NULL, m->wall, -1);
+  wall(b, ZN, z1, x0, x1, 0, H, (doors >> W_ZHI) & 1 ? &hz : NULL, m->wall, -1);
+  wall(b, XP, x0, z0, z1, 0, H, (doors >> W_XLO) & 1 ? &hx : NULL, m->accent, -1);
+  wall(b, XN, x1, z0, z1, 0, H, (doors >> W_XHI) & 1 ? &hx : NULL, m->wall, -1);
+  /* Ceiling light over the table, facing down, 1 cm below the ceiling. */
+  rect(b, YN, v3(x0 + 1.9, H - 0.01, z0 + 1.5), v3(x0 + 3.1, H - 0.01, z0 + 2.5), m->light);
+  if (furn & RF_TABLE)
+    box_out(b, v3(x0 + 1.6, 0, z0 + 1.5), v3(x0 + 3.2, 0.75, z0 + 2.4), m->table, F_NOBOTTOM);
+  if (furn & RF_CABINET) /* back against the wall: no back face */
+    box_out(b, v3(x0 + 2.0, 0, z0), v3(x0 + 3.4, 0.9, z0 + 0.5), m->cabinet,
+            F_YP | F_XN | F_XP | F_ZP);
+  if (furn & RF_SOFA) {
+    /* Seat in front of the backrest; the backrest's front starts above the seat. */
+    box_out(b, v3(x0 + 4.1, 0, z0 + 0.6), v3(x0 + 4.75, 0.42, z0 + 2.4), m->sofa,
+            F_YP | F_XN | F_ZN | F_ZP);
+    box_out(b, v3(x0 + 4.75, 0, z0 + 0.6), v3(x1, 0.85, z0 + 2.4), m->sofa, F_YP | F_ZN | F_ZP);
+    vrect(b, XN, x0 + 4.75, z0 + 0.6, z0 + 2.4, 0.42, 0.85, m->sofa);
+  }
+  if (furn & RF_PICTURE) vrect(b, XP, x0 + 0.01, z0 + 0.7, z0 + 2.1, 1.2, 2.0, m->picture);
+  if (furn & RF_DOOR) vrect(b, ZN, z1 - 0.01, x0 + DOOR_A0, x0 + DOOR_A1, 0, DOOR_H, m->door);
+  if (furn & RF_RUG)
+    rect(b, YP, v3(x0 + 2.0, 0.005, z0 + 2.7), v3(x0 + 3.8, 0.005, z0 + 3.6), m->rug);
+}
+
+/* Materials shared by "room" and "floor"; the accent wall is red. */
+static void room_materials(bld *b, room_mats *m) {
+  m->floor = mat(b, "floor", 0.55, 0.40, 0.26, 0, 0, 0);
+  m->ceil = mat(b, "ceiling", 0.80, 0.80, 0.78, 0, 0, 0);
+  m->wall = mat(b, "wall", 0.75, 0.74, 0.70, 0, 0, 0);
+  m->accent = mat(b, "wall_red", 0.70, 0.18, 0.12, 0, 0, 0);
+  m->light = mat(b, "light", 0.80, 0.80, 0.80, 100, 96, 88);
+  m->table = mat(b, "table", 0.45, 0.30, 0.18, 0, 0, 0);
+  m->cabinet = mat(b, "cabinet", 0.62, 0.60, 0.55, 0, 0, 0);
+  m->sofa = mat(b, "sofa", 0.20, 0.45, 0.25, 0, 0, 0);
+  m->picture = mat(b, "picture", 0.80, 0.68, 0.20, 0, 0, 0);
+  m->door = mat(b, "door", 0.40, 0.26, 0.15, 0, 0, 0);
+  m->rug = mat(b, "rug", 0.20, 0.25, 0.60, 0, 0, 0);
+}
+
+static void build_room(bld *b) {
+  room_mats m;
+  room_materials(b, &m);
+  room(b, 0, 0, 0, RF_TABLE | RF_CABINET | RF_SOFA | RF_PICTURE | RF_DOOR | RF_RUG, &m);
+  /* From the corner beyond the sofa, over the rug, toward the red wall and the cabinet. */
+  set_camera(b->s, v3(4.55, 1.65, 3.7), v3(1.6, 1.05, 0.9), 60);
+}
+
+#define FLOOR_NI 4 /* rooms along x */
+#define FLOOR_NJ 3 /* rooms along z */
+
+/* Doors of "floor": every room opens to its x neighbours (rows are chains); row 0 joins row 1
+ * in column 0 and row 1 joins row 2 in column 3, so all 12 rooms form one path of 11 doors. */
+static int floor_zdoor(int i, int j) { return (j == 0 && i == 0) || (j == 1 && i == FLOOR_NI - 1); }
+
+static void build_floor(bld *b) {
+  const double PX = ROOM_W + FLOOR_T, PZ = ROOM_D + FLOOR_T; /* room pitch */
+  room_mats m;
+  room_materials(b, &m);
+  int accents[4];
+  accents[0] = m.accent;
+  accents[1] = mat(b, "wall_blue", 0.20, 0.30, 0.62, 0, 0, 0);
+  accents[2] = mat(b, "wall_green", 0.22, 0.50, 0.28, 0, 0, 0);
+  accents[3] = mat(b, "wall_ochre", 0.78, 0.58, 0.25, 0, 0, 0);
+  for (int j = 0; j < FLOOR_NJ; j++)
+    for (int i = 0; i < FLOOR_NI; i++) {
+      double x0 = i * PX, z0 = j * PZ;
+      unsigned doors = 0;
+      if (i > 0) doors |= 1u << W_XLO;
+      if (i < FLOOR_NI - 1) doors |= 1u << W_XHI;
+      if (j > 0 && floor_zdoor(i, j - 1)) doors |= 1u << W_ZLO;
+      if (j < FLOOR_NJ - 1 && floor_zdoor(i, j)) doors |= 1u << W_ZHI;
+      /* Two furniture sets in a checkerboard, 11 and 9 polygons. Total: 12 rooms x 7 (shell
+       * and light) + 11 doors x 8 (2 x 2 extra wall pieces, 2 jambs, soffit, threshold)
+       * + 6 x 11 + 6 x 9 = 292. */
+      unsigned furn = (i + j) % 2 == 0 ? RF_TABLE | RF_CABINET | RF_PICTURE | RF_RUG
+                                       : RF_SOFA | RF_PICTURE;
+      room_mats rm = m;
+      rm.accent = accents[(i + 2 * j) % 4];
+      room(b, x0, z0, doors, furn, &rm);
+      /* The door gaps through the walls to the +x and +z neighbours. */
+      if (i < FLOOR_NI - 1) {
+        hole h = room_door_x(z0);
+        tunnel(b, 0, x0 + ROOM_W, x0 + PX, &h, m.wall);
+      }
+      if (j < FLOOR_NJ - 1 && floor_zdoor(i, j)) {
+        hole h = room_door_z(x0);
+        tunnel(b, 2, z0 + ROOM_D, z0 + PZ, &h, m.wall);
+      }
+    }
+  /* In room (0,1) at its x = 0 wall, looking along +x through the row of aligned doors. */
+  double zc = PZ + ROOM_D - 0.5 * (DOOR_A0 + DOOR_A1);
+  set_camera(b->s, v3(0.35, 1.55, zc + 0.1), v3(FLOOR_NI * PX, 1.05, zc), 62);
+}
+
+/* ---------------------------------------------------------------- museum */
+
+#define MU_C 3.0  /* cell size */
+#define MU_NX 16  /* cells along x */
+#define MU_NZ 10  /* cells along z */
+#define MU_NS 4   /* storeys */
+#define MU_SH 4.5 /* storey height (slab centre to slab centre) */
+#define MU_T 0.3  /* wall thickness between halls, centred on cell lines */
+#define MU_S 0.4  /* slab thickness between storeys, centred on k * MU_SH */
+#define MU_P 0.4  /* parapet thickness */
+#define MU_PH 1.1 /* parapet height */
+
+/* Halls: rectangles of cells [i0,i1) x [j0,j1), tiling the storey. Hall 'C' (index MU_CENTRE)
+ * is the central hall [6,10) x [0,10); above the ground floor its cells [6,10) x [3,7) are the
+ * atrium void, open from the ground floor to the skylight. */
+typedef struct mu_rect {
+  int i0, j0, i1, j1;
+} mu_rect;
+#define MU_CENTRE 0
+#define MU_MAXH 5
+static const int mu_nhalls[MU_NS] = {5, 5, 5, 3};
+static const mu_rect mu_halls[MU_NS][MU_MAXH] = {
+    {{6, 0, 10, 10}, {0, 0, 6, 5}, {0, 5, 6, 10}, {10, 0, 16, 5}, {10, 5, 16, 10}},
+    {{6, 0, 10, 10}, {0, 0, 6, 5}, {0, 5, 6, 10}, {10, 0, 13, 10}, {13, 0, 16, 10}},
+    {{6, 0, 10, 10}, {0, 0, 6, 5}, {0, 5, 6, 10}, {10, 0, 16, 5}, {10, 5, 16, 10}},
+    {{6, 0, 10, 10}, {0, 0, 6, 10}, {10, 0, 16, 10}, {0, 0, 0, 0}, {0, 0, 0, 0}}};
+#define MU_VI0 6 /* void cells [6,10) x [3,7) */
+#define MU_VI1 10
+#define MU_VJ0 3
+#define MU_VJ1 7
+
+static int mu_is_void(int k, int i, int j) {
+  return k > 0 && i >= MU_VI0 && i < MU_VI1 && j >= MU_VJ0 && j < MU_VJ1;
+}
+
+/* Hall index of cell (i,j) on storey 'k', or -1 outside the building. */
+static int mu_hall_at(int k, int i, int j) {
+  for (int h = 0; h < mu_nhalls[k]; h++) {
+    const mu_rect *r = &mu_halls[k][h];
+    if (i >= r->i0 && i < r->i1 && j >= r->j0 && j < r->j1) return h;
+  }
+  return -1;
+}
+
+typedef struct mu_mats {
+  int stone, wood, ceil, white, hall[5], parapet, plinth, display, bench, lamp, sky, window;
+} mu_mats;
+
+static double mu_floor_y(int k) { return k * MU_SH + (k > 0 ? 0.5 * MU_S : 0); }
+static double mu_ceil_y(int k) { return (k + 1) * MU_SH - (k < MU_NS - 1 ? 0.5 * MU_S : 0); }
+
+/* Inner box of hall 'r': cell bounds, pulled in by half a wall where another hall is beyond. */
+static void mu_inner(const mu_rect *r, double *x0, double *x1, double *z0, double *z1) {
+  *x0 = r->i0 * MU_C + (r->i0 > 0 ? 0.5 * MU_T : 0);
+  *x1 = r->i1 * MU_C - (r->i1 < MU_NX ? 0.5 * MU_T : 0);
+  *z0 = r->j0 * MU_C + (r->j0 > 0 ? 0.5 * MU_T : 0);
+  *z1 = r->j1 * MU_C - (r->j1 < MU_NZ ? 0.5 * MU_T : 0);
+}
+
+/* Kinds of wall panels (one cell wide). */
+enum { E_WALL, E_DOOR, E_OPENING, E_WINDOW, E_ENTRANCE };
+
+/* Panel kind at cell 'c' along a wall line between halls 'a' and 'b' (b = -1: outside) on
+ * storey 'k'; 'vd' marks a panel whose far or near side is the atrium void; 'south' marks the
+ * building's z = max facade. */
+static int mu_panel_kind(int k, int b, int c, int vd, int south) {
+  if (b < 0) {
+    if (k == 0 && south && (c == 7 || c == 8)) return E_ENTRANCE;
+    return c % 3 == 1 ? E_WALL : E_WINDOW;
+  }
+  if (vd) return c % 2 == 0 ? E_OPENING : E_WALL;
+  return c % 3 == 1 ? E_DOOR : E_WALL;
+}
+
+static hole mu_hole(int kind, double a0, double y0) {
+  switch (kind) {
+  case E_DOOR: return (hole){a0 + 0.9, a0 + MU_C - 0.9, y0, y0 + 2.7};
+  case E_ENTRANCE: return (hole){a0 + 0.6, a0 + MU_C - 0.6, y0, y0 + 3.2};
+  default: return (hole){a0 + 0.6, a0 + MU_C - 0.6, y0 + 1.0, y0 + 3.4};
+  }
+}
+
+/* Material of the walls of hall 'h' on storey 'k'. */
+static int mu_wall_mat(const mu_mats *m, int k, int h) {
+  return h == MU_CENTRE ? m->white : m->hall[(h + 2 * k) % 5];
+}
+
+/* One side of hall 'h' on storey 'k': the wall line 'axis' = 'c' (axis 0: x = c, facing 'dir'
+ * into the hall; axis 2: z = c), made of one panel per cell 'q' in [q0, q1) along it, clipped
+ * to [a0, a1]. 'nq' is the cell index just beyond the line (on the far side). Openings to the
+ * neighbour get their tunnel from the hall on the low side only. */
+static void mu_side(bld *b, const mu_mats *m, int k, int h, int axis, int dir, double c,
+                    int q0, int q1, double a0, double a1, int nq) {
+  double y0 = mu_floor_y(k), y1 = mu_ceil_y(k);
+  int wm = mu_wall_mat(m, k, h);
+  int d = dir > 0 ? 1 : -1; /* from the far cell's row or column to the near one's */
+  for (int q = q0; q < q1; q++) {
+    int ni = axis == 0 ? nq : q, nj = axis == 0 ? q : nq;         /* far cell */
+    int hi = axis == 0 ? nq + d : q, hj = axis == 0 ? q : nq + d; /* near cell */
+    int nb = (ni < 0 || nj < 0 || ni >= MU_NX || nj >= MU_NZ) ? -1 : mu_hall_at(k, ni, nj);
+    int vd = mu_is_void(k, ni, nj) || mu_is_void(k, hi, hj);
+    int kind = mu_panel_kind(k, nb, q, vd, axis == 2 && nj == MU_NZ);
+    double p0 = fmax(a0, q * MU_C), p1 = fmin(a1, (q + 1) * MU_C);
+    if (kind == E_WALL) {
+      vrect(b, dir, c, p0, p1, y0, y1, wm);
+      continue;
+    }
+    hole ho = mu_hole(kind, q * MU_C, y0);
+    int glass = nb < 0 ? m->window : -1;
+    wall(b, dir, c, p0, p1, y0, y1, &ho, wm, glass);
+    /* The gap between the two halls' faces is added once, by the hall on the low side (whose
+     * face here points toward -axis). */
+    if (nb >= 0 && dir < 0) tunnel(b, axis, c, c + MU_T, &ho, wm);
+  }
+}
+
+/* Deterministic per-cell selector in [0, 12). */
+static int mu_hash(int k, int i, int j) { return (i * 5 + j * 11 + k * 7 + (i * j) % 3) % 12; }
+
+/* Floor tile, ceiling tile (or skylight), lamp and furniture of cell (i,j) of hall 'h'. */
+static void mu_cell(bld *b, const mu_mats *m, int k, int h, int i, int j, double x0, double x1,
+                    double z0, double z1) {
+  const mu_rect *r = &mu_halls[k][h];
+  double cx0 = fmax(x0, i * MU_C), cx1 = fmin(x1, (i + 1) * MU_C);
+  double cz0 = fmax(z0, j * MU_C), cz1 = fmin(z1, (j + 1) * MU_C);
+  double yf = mu_floor_y(k), yc = mu_ceil_y(k), xc = (i + 0.5) * MU_C, zc = (j + 0.5) * MU_C;
+  int top = k == MU_NS - 1, vd = mu_is_void(k, i, j);
+  if (!vd) {
+    /* Upper-floor galleries stop at the parapets beside the void. */
+    double fz0 = cz0, fz1 = cz1;
+    if (k > 0 && h == MU_CENTRE && j == MU_VJ0 - 1) fz1 = MU_VJ0 * MU_C - MU_P;
+    if (k > 0 && h == MU_CENTRE && j == MU_VJ1) fz0 = MU_VJ1 * MU_C + MU_P;
+    rect(b, YP, v3(cx0, yf, fz0), v3(cx1, yf, fz1), k == 0 ? m->stone : m->wood);
+  }
+  if (top || !mu_is_void(k + 1, i, j)) {
+    /* Skylights over the void and over every other top-floor wing cell; lamps elsewhere. */
+    int sky = top && (vd || (h != MU_CENTRE && (i + j) % 2 == 0));
+    rect(b, YN, v3(cx0, yc, cz0), v3(cx1, yc, cz1), sky ? m->sky : m->ceil);
+    if (!sky && (i + j + k) % 2 == 0)
+      rect(b, YN, v3(xc - 0.6, yc - 0.02, zc - 0.6), v3(xc + 0.6, yc - 0.02, zc + 0.6), m->lamp);
+  }
+  if (vd) return;
+  if (h == MU_CENTRE && j >= MU_VJ0 && j < MU_VJ1) { /* ground floor of the atrium */
+    if ((i + j) % 2 == 0)
+      box_out(b, v3(xc - 0.9, yf, zc - 0.25), v3(xc + 0.9, yf + 0.45, zc + 0.25), m->bench,
+              F_NOBOTTOM);
+    return;
+  }
+  int sel = mu_hash(k, i, j);
+  int inner = i > r->i0 && i < r->i1 - 1 && j > r->j0 && j < r->j1 - 1;
+  if (h != MU_CENTRE && inner && (sel == 0 || sel == 6)) { /* display wall, 3 m tall */
+    if ((i + j) % 2)
+      box_out(b, v3(xc - 1.1, yf, zc - 0.2), v3(xc + 1.1, yf + 3.0, zc + 0.2), m->display,
+              F_NOBOTTOM);
+    else
+      box_out(b, v3(xc - 0.2, yf, zc - 1.1), v3(xc + 0.2, yf + 3.0, zc + 1.1), m->display,
+              F_NOBOTTOM);
+  } else if (sel % 3 == 1 || sel == 8) { /* plinth, 0.6-1.0 m wide, 0.8-1.2 m tall */
+    double w = 0.3 + 0.1 * (sel % 3), ht = 0.8 + 0.1 * (sel % 5);
+    box_out(b, v3(xc - w, yf, zc - w), v3(xc + w, yf + ht, zc + w), m->plinth, F_NOBOTTOM);
+  }
+}
+
+/* The central hall's share of the atrium on storey k >= 1: parapets along the void's north and
+ * south edges (their void-side face reaches down to the ceiling of the storey below, covering
+ * the slab's edge), and the slab-thick strips of its walls beside the void below this floor. */
+static void mu_atrium(bld *b, const mu_mats *m, int k, double x0, double x1) {
+  double yf = mu_floor_y(k), yb = mu_ceil_y(k - 1), yp = yf + MU_PH;
+  double zn = MU_VJ0 * MU_C, zs = MU_VJ1 * MU_C;
+  for (int i = MU_VI0; i < MU_VI1; i++) {
+    double a0 = fmax(x0, i * MU_C), a1 = fmin(x1, (i + 1) * MU_C);
+    vrect(b, ZP, zn, a0, a1, yb, yp, m->parapet);          /* into the void */
+    vrect(b, ZN, zn - MU_P, a0, a1, yf, yp, m->parapet);   /* into the gallery */
+    rect(b, YP, v3(a0, yp, zn - MU_P), v3(a1, yp, zn), m->parapet);
+    vrect(b, ZN, zs, a0, a1, yb, yp, m->parapet);
+    vrect(b, ZP, zs + MU_P, a0, a1, yf, yp, m->parapet);
+    rect(b, YP, v3(a0, yp, zs), v3(a1, yp, zs + MU_P), m->parapet);
+  }
+  for (int j = MU_VJ0; j < MU_VJ1; j++) {
+    vrect(b, XP, x0, j * MU_C, (j + 1) * MU_C, yb, yf, m->white);
+    vrect(b, XN, x1, j * MU_C, (j + 1) * MU_C, yb, yf, m->white);
+  }
+}
+
+static void build_museum(bld *b) {
+  mu_mats m;
+  m.stone = mat(b, "stone", 0.55, 0.52, 0.48, 0, 0, 0);
+  m.wood = mat(b, "parquet", 0.50, 0.36, 0.22, 0, 0, 0);
+  m.ceil = mat(b, "ceiling", 0.80, 0.80, 0.80, 0, 0, 0);
+  m.white = mat(b, "wall_white", 0.78, 0.77, 0.74, 0, 0, 0);
+  m.hall[0] = mat(b, "wall_warm", 0.76, 0.70, 0.60, 0, 0, 0);
+  m.hall[1] = mat(b, "wall_red", 0.62, 0.20, 0.15, 0, 0, 0);
+  m.hall[2] = mat(b, "wall_blue", 0.22, 0.32, 0.58, 0, 0, 0);
+  m.hall[3] = mat(b, "wall_green", 0.28, 0.48, 0.32, 0, 0, 0);
+  m.hall[4] = mat(b, "wall_ochre", 0.76, 0.60, 0.30, 0, 0, 0);
+  m.parapet = mat(b, "parapet", 0.60, 0.60, 0.62, 0, 0, 0);
+  m.plinth = mat(b, "plinth", 0.85, 0.85, 0.82, 0, 0, 0);
+  m.display = mat(b, "display_wall", 0.35, 0.35, 0.38, 0, 0, 0);
+  m.bench = mat(b, "bench", 0.40, 0.28, 0.18, 0, 0, 0);
+  m.lamp = mat(b, "lamp", 0.80, 0.80, 0.80, 80, 76, 68);
+  m.sky = mat(b, "skylight", 0.10, 0.10, 0.10, 55, 60, 70);
+  m.window = mat(b, "window", 0.10, 0.10, 0.10, 40, 44, 52);
+  for (int k = 0; k < MU_NS; k++)
+    for (int h = 0; h < mu_nhalls[k]; h++) {
+      const mu_rect *r = &mu_halls[k][h];
+      double x0, x1, z0, z1;
+      mu_inner(r, &x0, &x1, &z0, &z1);
+      for (int j = r->j0; j < r->j1; j++)
+        for (int i = r->i0; i < r->i1; i++) mu_cell(b, &m, k, h, i, j, x0, x1, z0, z1);
+      mu_side(b, &m, k, h, 2, ZP, z0, r->i0, r->i1, x0, x1, r->j0 - 1);
+      mu_side(b, &m, k, h, 2, ZN, z1, r->i0, r->i1, x0, x1, r->j1);
+      mu_side(b, &m, k, h, 0, XP, x0, r->j0, r->j1, z0, z1, r->i0 - 1);
+      mu_side(b, &m, k, h, 0, XN, x1, r->j0, r->j1, z0, z1, r->i1);
+      if (h == MU_CENTRE && k > 0) mu_atrium(b, &m, k, x0, x1);
+    }
+  /* On the first-floor north gallery behind the parapet, looking across and down the atrium. */
+  set_camera(b->s, v3(19.8, mu_floor_y(1) + 1.7, 8.3), v3(27.0, 1.5, 19.5), 70);
+}
+
+/* ---------------------------------------------------------------- cornell */
+
+/* The Cornell box, published data in mm (x, y, z); quads in published order and winding. */
+static const double cb_floor[4][3] = {
+    {552.8, 0.0, 0.0}, {0.0, 0.0, 0.0}, {0.0, 0.0, 559.2}, {549.6, 0.0, 559.2}};
+static const double cb_ceiling[4][3] = {
+    {556.0, 548.8, 0.0}, {556.0, 548.8, 559.2}, {0.0, 548.8, 559.2}, {0.0, 548.8, 0.0}};
+static const double cb_back[4][3] = {
+    {549.6, 0.0, 559.2}, {0.0, 0.0, 559.2}, {0.0, 548.8, 559.2}, {556.0, 548.8, 559.2}};
+static const double cb_right[4][3] = { /* green, x = 0 */
+    {0.0, 0.0, 559.2}, {0.0, 0.0, 0.0}, {0.0, 548.8, 0.0}, {0.0, 548.8, 559.2}};
+static const double cb_left[4][3] = { /* red, x ~ 556 */
+    {552.8, 0.0, 0.0}, {549.6, 0.0, 559.2}, {556.0, 548.8, 559.2}, {556.0, 548.8, 0.0}};
+/* Published at y = 548.8 like the ceiling; lowered 0.1 mm so the two do not coincide. */
+static const double cb_light[4][3] = {
+    {343.0, 548.7, 227.0}, {343.0, 548.7, 332.0}, {213.0, 548.7, 332.0}, {213.0, 548.7, 227.0}};
+static const double cb_short[5][4][3] = {
+    {{130.0, 165.0, 65.0}, {82.0, 165.0, 225.0}, {240.0, 165.0, 272.0}, {290.0, 165.0, 114.0}},
+    {{290.0, 0.0, 114.0}, {290.0, 165.0, 114.0}, {240.0, 165.0, 272.0}, {240.0, 0.0, 272.0}},
+    {{130.0, 0.0, 65.0}, {130.0, 165.0, 65.0}, {290.0, 165.0, 114.0}, {290.0, 0.0, 114.0}},
+    {{82.0, 0.0, 225.0}, {82.0, 165.0, 225.0}, {130.0, 165.0, 65.0}, {130.0, 0.0, 65.0}},
+    {{240.0, 0.0, 272.0}, {240.0, 165.0, 272.0}, {82.0, 165.0, 225.0}, {82.0, 0.0, 225.0}}};
+static const double cb_tall[5][4][3] = {
+    {{423.0, 330.0, 247.0}, {265.0, 330.0, 296.0}, {314.0, 330.0, 456.0}, {472.0, 330.0, 406.0}},
+    {{423.0, 0.0, 247.0}, {423.0, 330.0, 247.0}, {472.0, 330.0, 406.0}, {472.0, 0.0, 406.0}},
+    {{472.0, 0.0, 406.0}, {472.0, 330.0, 406.0}, {314.0, 330.0, 456.0}, {314.0, 0.0, 456.0}},
+    {{314.0, 0.0, 456.0}, {314.0, 330.0, 456.0}, {265.0, 330.0, 296.0}, {265.0, 0.0, 296.0}},
+    {{265.0, 0.0, 296.0}, {265.0, 330.0, 296.0}, {423.0, 330.0, 247.0}, {423.0, 0.0, 247.0}}};
+
+static void cb_quad(bld *b, const double q[4][3], int m) {
+  hr_vec3 v[4];
+  for (int k = 0; k < 4; k++) v[k] = v3(q[k][0] * 1e-3, q[k][1] * 1e-3, q[k][2] * 1e-3);
+  poly(b, v, 4, m);
+}
+
+/* Polygon order: floor, ceiling, back, right (green), left (red), light, short block (top
+ * first, 6-10), tall block (top first, 11-15). Material names follow McGuire's OBJ. */
+static void build_cornell(bld *b) {
+  int floor = mat(b, "floor", 0.725, 0.71, 0.68, 0, 0, 0);
+  int ceiling = mat(b, "ceiling", 0.725, 0.71, 0.68, 0, 0, 0);
+  int back = mat(b, "backWall", 0.725, 0.71, 0.68, 0, 0, 0);
+  int right = mat(b, "rightWall", 0.14, 0.45, 0.091, 0, 0, 0);
+  int left = mat(b, "leftWall", 0.63, 0.065, 0.05, 0, 0, 0);
+  int light = mat(b, "light", 0.78, 0.78, 0.78, 17, 12, 4);
+  int sbox = mat(b, "shortBox", 0.725, 0.71, 0.68, 0, 0, 0);
+  int tbox = mat(b, "tallBox", 0.725, 0.71, 0.68, 0, 0, 0);
+  cb_quad(b, cb_floor, floor);
+  cb_quad(b, cb_ceiling, ceiling);
+  cb_quad(b, cb_back, back);
+  cb_quad(b, cb_right, right);
+  cb_quad(b, cb_left, left);
+  cb_quad(b, cb_light, light);
+  for (int f = 0; f < 5; f++) cb_quad(b, cb_short[f], sbox);
+  for (int f = 0; f < 5; f++) cb_quad(b, cb_tall[f], tbox);
+  /* Published camera: 35 mm focal length, 25 mm film: fov = 2 atan(12.5 / 35). */
+  set_camera(b->s, v3(0.278, 0.273, -0.800), v3(0.278, 0.273, 0.2796),
+             2.0 * atan(12.5 / 35.0) * 180.0 / M_PI);
+}
+
+/* ---------------------------------------------------------------- public */
+
+static const char *const builtin_names[] = {"room", "floor", "museum", "cornell", NULL};
+
+const char *const *hr_scene_builtin_names(void) { return builtin_names; }
+
+hr_status hr_scene_builtin(const char *name, hr_scene **out, hr_err *err) {
+  static void (*const builders[])(bld *) = {build_room, build_floor, build_museum,
+                                            build_cornell};
+  if (out) *out = NULL;
+  int which = -1;
+  for (int i = 0; name && builtin_names[i]; i++)
+    if (strcmp(name, builtin_names[i]) == 0) which = i;
+  if (which < 0)
+    return hr_err_set(err, HR_ERR_INVALID,
+                      "unknown scene '%s' (built-in: room, floor, museum, cornell)",
+                      name ? name : "");
+  if (!out) return hr_err_set(err, HR_ERR_INVALID, "hr_scene_builtin: 'out' is NULL");
+  bld b = {NULL, HR_OK, 0};
+  if (hr_scene_create(name, &b.s) != HR_OK)
+    return hr_err_set(err, HR_ERR_NOMEM, "out of memory building scene '%s'", name);
+  builders[which](&b);
+  if (b.st == HR_OK && b.bad)
+    b.st = hr_err_set(err, HR_ERR_INVALID, "built-in scene '%s': %d degenerate polygon(s)",
+                      name, b.bad);
+  else if (b.st != HR_OK)
+    hr_err_set(err, b.st, "building scene '%s' failed (status %d)", name, (int)b.st);
+  if (b.st != HR_OK) {
+    hr_scene_destroy(&b.s);
+    return b.st;
+  }
+  *out = b.s;
+  return HR_OK;
+}

@@ -1,0 +1,730 @@
+/* mesh.c: vertex reconstruction from the leaf elements (a smooth, crack-free triangle mesh per
+ * surface), the automatic exposure, and the PLY and GLB writers. See output.h.
+ *
+ * Per surface: a hash map from lattice coordinates to vertex ids collects the leaf corners and
+ * their area-weighted mean radiosity. Leaves are then visited from the largest to the smallest:
+ * for each leaf edge the midpoint is looked up recursively (a dyadic subdivision has a vertex
+ * strictly inside an edge only if it has one at the edge's midpoint), which finds the T-vertices
+ * in order along the edge; each gets the mean of its two neighbours along the edge, i.e. the
+ * exact linear interpolation of the larger leaf's edge end values. Largest first guarantees
+ * that a leaf's own corners are final (a corner can only be a T-vertex of a strictly larger
+ * leaf). The leaf polygon (corners + T-vertices, convex) is then fanned. */
+#include "output.h"
+#include "vec.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ------------------------------------------------------------------ growable arrays */
+
+static int grow_bytes(void **p, int64_t *cap, int64_t need, size_t sz) {
+  if (need <= *cap) return 1;
+  int64_t nc = *cap ? *cap : 64;
+  while (nc < need) nc *= 2;
+  void *q = realloc(*p, (size_t)nc * sz);
+  if (!q) return 0;
+  *p = q;
+  *cap = nc;
+  return 1;
+}
+
+/* ------------------------------------------------------------------ lattice hash map */
+
+#define KEY_EMPTY UINT64_MAX
+
+typedef struct lmap {
+  uint64_t *keys;
+  int32_t *vals;
+  uint64_t mask; /* capacity - 1 (power of two) */
+  int64_t alloc; /* allocated slots */
+} lmap;
+
+static inline uint64_t lat_key(uint32_t a, uint32_t b) { return ((uint64_t)a << 25) | b; }
+
+static inline uint64_t hash64(uint64_t x) {
+  x ^= x >> 31;
+  x *= 0x7fb5d329728ea185ull;
+  x ^= x >> 27;
+  x *= 0x81dadef4bc2dd44dull;
+  x ^= x >> 33;
+  return x;
+}
+
+/* Prepares the map for up to 'n' keys (load <= 1/2); clears only the part used. */
+static int lmap_reset(lmap *m, int64_t n) {
+  int64_t cap = 16;
+  while (cap < 2 * n) cap *= 2;
+  if (cap > m->alloc) {
+    free(m->keys);
+    free(m->vals);
+    m->keys = malloc((size_t)cap * sizeof *m->keys);
+    m->vals = malloc((size_t)cap * sizeof *m->vals);
+    if (!m->keys || !m->vals) {
+      m->alloc = 0;
+      return 0;
+    }
+    m->alloc = cap;
+  }
+  m->mask = (uint64_t)cap - 1;
+  memset(m->keys, 0xff, (size_t)cap * sizeof *m->keys);
+  return 1;
+}
+
+static inline int32_t lmap_get(const lmap *m, uint64_t key) {
+  uint64_t i = hash64(key) & m->mask;
+  for (;;) {
+    uint64_t k = m->keys[i];
+    if (k == key) return m->vals[i];
+    if (k == KEY_EMPTY) return -1;
+    i = (i + 1) & m->mask;
+  }
+}
+
+/* Returns the value of 'key', inserting 'val' when absent (*inserted = 1). */
+static inline int32_t lmap_put(lmap *m, uint64_t key, int32_t val, int *inserted) {
+  uint64_t i = hash64(key) & m->mask;
+  for (;;) {
+    uint64_t k = m->keys[i];
+    if (k == key) {
+      *inserted = 0;
+      return m->vals[i];
+    }
+    if (k == KEY_EMPTY) {
+      m->keys[i] = key;
+      m->vals[i] = val;
+      *inserted = 1;
+      return val;
+    }
+    i = (i + 1) & m->mask;
+  }
+}
+
+/* ------------------------------------------------------------------ build state */
+
+typedef struct build {
+  hr_mesh *m;
+  int64_t cap_v, cap_t;
+  /* per-surface scratch, indexed by local vertex id */
+  double *val;   /* 3 per vertex: B */
+  double *wsum;  /* area weight sum */
+  uint32_t *lat; /* 2 per vertex: lattice coordinates of corners */
+  double *par;   /* 2 per vertex: lattice coordinates as doubles (centres are not integral) */
+  int64_t cap_l;
+  int64_t nloc;
+  /* ring of the current leaf polygon (local ids) */
+  int32_t *ring;
+  int64_t cap_ring, nring;
+  lmap map;
+} build;
+
+static double lum(const double *b) { return 0.2126 * b[0] + 0.7152 * b[1] + 0.0722 * b[2]; }
+
+static hr_vec3 surf_point(const hr_surface *f, double a, double b) {
+  if (f->nverts == 4) {
+    hr_vec3 p = v3_scale(f->v[0], (1 - a) * (1 - b));
+    p = v3_add(p, v3_scale(f->v[1], a * (1 - b)));
+    p = v3_add(p, v3_scale(f->v[2], a * b));
+    return v3_add(p, v3_scale(f->v[3], (1 - a) * b));
+  }
+  hr_vec3 p = v3_add(f->v[0], v3_scale(v3_sub(f->v[1], f->v[0]), a));
+  return v3_add(p, v3_scale(v3_sub(f->v[2], f->v[0]), b));
+}
+
+static int local_grow(build *bd, int64_t need) {
+  if (need <= bd->cap_l) return 1;
+  int64_t nc = bd->cap_l ? bd->cap_l : 256;
+  while (nc < need) nc *= 2;
+  double *v = realloc(bd->val, (size_t)nc * 3 * sizeof *v);
+  if (!v) return 0;
+  bd->val = v;
+  double *w = realloc(bd->wsum, (size_t)nc * sizeof *w);
+  if (!w) return 0;
+  bd->wsum = w;
+  uint32_t *l = realloc(bd->lat, (size_t)nc * 2 * sizeof *l);
+  if (!l) return 0;
+  bd->lat = l;
+  double *pp = realloc(bd->par, (size_t)nc * 2 * sizeof *pp);
+  if (!pp) return 0;
+  bd->par = pp;
+  bd->cap_l = nc;
+  return 1;
+}
+
+static int ring_push(build *bd, int32_t id) {
+  if (!grow_bytes((void **)&bd->ring, &bd->cap_ring, bd->nring + 1, sizeof *bd->ring)) return 0;
+  bd->ring[bd->nring++] = id;
+  return 1;
+}
+
+/* Appends the T-vertices strictly inside lattice segment P-Q (local ids pid, qid) to the ring in
+ * order from P to Q, setting their values to the midpoint means. Returns 0 on NOMEM. */
+static int probe(build *bd, int32_t pid, int32_t qid, int *found) {
+  const uint32_t *P = &bd->lat[2 * pid], *Q = &bd->lat[2 * qid];
+  uint32_t sa = P[0] + Q[0], sb = P[1] + Q[1];
+  if ((sa | sb) & 1u) return 1;
+  if (P[0] == Q[0] && P[1] == Q[1]) return 1;
+  int32_t mid = lmap_get(&bd->map, lat_key(sa / 2, sb / 2));
+  if (mid < 0) return 1;
+  *found = 1;
+  for (int c = 0; c < 3; c++)
+    bd->val[3 * mid + c] = 0.5 * (bd->val[3 * pid + c] + bd->val[3 * qid + c]);
+  if (!probe(bd, pid, mid, found)) return 0;
+  if (!ring_push(bd, mid)) return 0;
+  return probe(bd, mid, qid, found);
+}
+
+static int tris_grow(build *bd, int64_t need) {
+  if (need <= bd->cap_t) return 1;
+  hr_mesh *m = bd->m;
+  int64_t nc = bd->cap_t ? bd->cap_t : 256;
+  while (nc < need) nc *= 2;
+  uint32_t *t = realloc(m->tri, (size_t)nc * 3 * sizeof *t);
+  if (!t) return 0;
+  m->tri = t;
+  int32_t *ts = realloc(m->tri_surf, (size_t)nc * sizeof *ts);
+  if (!ts) return 0;
+  m->tri_surf = ts;
+  int64_t *tl = realloc(m->tri_leaf, (size_t)nc * sizeof *tl);
+  if (!tl) return 0;
+  m->tri_leaf = tl;
+  uint8_t *te = realloc(m->tri_emit, (size_t)nc * sizeof *te);
+  if (!te) return 0;
+  m->tri_emit = te;
+  bd->cap_t = nc;
+  return 1;
+}
+
+static int emit_tri(build *bd, int64_t vbase, int32_t a, int32_t b, int32_t c, int surf,
+                    int64_t leaf, uint8_t emit) {
+  hr_mesh *m = bd->m;
+  int64_t t = m->ntris;
+  if (!tris_grow(bd, t + 1)) return 0;
+  m->tri[3 * t] = (uint32_t)(vbase + a);
+  m->tri[3 * t + 1] = (uint32_t)(vbase + b);
+  m->tri[3 * t + 2] = (uint32_t)(vbase + c);
+  m->tri_surf[t] = surf;
+  m->tri_leaf[t] = leaf;
+  m->tri_emit[t] = emit;
+  m->ntris = t + 1;
+  return 1;
+}
+
+static int verts_grow(build *bd, int64_t need) {
+  if (need <= bd->cap_v) return 1;
+  int64_t nc = bd->cap_v ? bd->cap_v : 256;
+  while (nc < need) nc *= 2;
+  float *p = realloc(bd->m->pos, (size_t)nc * 3 * sizeof *p);
+  if (!p) return 0;
+  bd->m->pos = p;
+  float *b = realloc(bd->m->B, (size_t)nc * 3 * sizeof *b);
+  if (!b) return 0;
+  bd->m->B = b;
+  bd->cap_v = nc;
+  return 1;
+}
+
+/* Lattice edge length of a leaf (max-norm over its edges). */
+static uint32_t leaf_size(const hr_leaf *l) {
+  uint32_t s = 0;
+  for (int i = 0; i < l->nverts; i++) {
+    int j = (i + 1) % l->nverts;
+    int64_t da = (int64_t)l->lat[j][0] - l->lat[i][0], db = (int64_t)l->lat[j][1] - l->lat[i][1];
+    uint32_t d = (uint32_t)(llabs(da) > llabs(db) ? llabs(da) : llabs(db));
+    if (d > s) s = d;
+  }
+  return s;
+}
+
+static int log2u(uint32_t s) {
+  int k = 0;
+  while (s > 1) {
+    s >>= 1;
+    k++;
+  }
+  return k;
+}
+
+/* Processes one surface's leaves (indices idx[0..k)); 'order' is scratch of k entries. */
+static hr_status build_surface(build *bd, const hr_scene *s, int surf, const hr_leaf *leaves,
+                               const int64_t *idx, int64_t k, int64_t *order) {
+  hr_mesh *m = bd->m;
+  const hr_surface *f = &s->surfs[surf];
+  const double *em = s->mats[f->material].emit;
+  uint8_t emit = (em[0] > 0 || em[1] > 0 || em[2] > 0) ? 1 : 0;
+  int nv = f->nverts;
+  if (k * (nv + 1) >= INT32_MAX) return HR_ERR_TOO_BIG;
+  if (!lmap_reset(&bd->map, k * nv)) return HR_ERR_NOMEM;
+  if (!local_grow(bd, k * nv + k)) return HR_ERR_NOMEM;
+  bd->nloc = 0;
+  /* 1. corners and their area-weighted sums */
+  for (int64_t i = 0; i < k; i++) {
+    const hr_leaf *l = &leaves[idx[i]];
+    /* a tiny weight keeps zero-area leaves meaningful without disturbing real weights */
+    double w = (l->area > 0 && isfinite(l->area)) ? l->area : 1e-300;
+    for (int c = 0; c < nv; c++) {
+      int ins;
+      int32_t id = lmap_put(&bd->map, lat_key(l->lat[c][0], l->lat[c][1]), (int32_t)bd->nloc, &ins);
+      if (ins) {
+        bd->lat[2 * id] = l->lat[c][0];
+        bd->lat[2 * id + 1] = l->lat[c][1];
+        bd->par[2 * id] = l->lat[c][0];
+        bd->par[2 * id + 1] = l->lat[c][1];
+        bd->val[3 * id] = bd->val[3 * id + 1] = bd->val[3 * id + 2] = 0;
+        bd->wsum[id] = 0;
+        bd->nloc++;
+      }
+      for (int ch = 0; ch < 3; ch++) bd->val[3 * id + ch] += w * l->B[ch];
+      bd->wsum[id] += w;
+    }
+  }
+  for (int64_t v = 0; v < bd->nloc; v++)
+    for (int ch = 0; ch < 3; ch++) bd->val[3 * v + ch] /= bd->wsum[v];
+  /* 2. leaves from the largest to the smallest (counting sort on log2 of the size) */
+  int64_t start[33] = {0};
+  for (int64_t i = 0; i < k; i++) start[32 - log2u(leaf_size(&leaves[idx[i]]))]++;
+  int64_t acc = 0;
+  for (int b = 0; b < 33; b++) {
+    int64_t c = start[b];
+    start[b] = acc;
+    acc += c;
+  }
+  for (int64_t i = 0; i < k; i++) order[start[32 - log2u(leaf_size(&leaves[idx[i]]))]++] = idx[i];
+  /* 3. T-vertices and triangulation */
+  int64_t vbase = m->nverts;
+  for (int64_t i = 0; i < k; i++) {
+    int64_t li = order[i];
+    const hr_leaf *l = &leaves[li];
+    int32_t cid[4];
+    for (int c = 0; c < nv; c++) cid[c] = lmap_get(&bd->map, lat_key(l->lat[c][0], l->lat[c][1]));
+    /* keep counter-clockwise in lattice space */
+    double sa = 0;
+    for (int c = 0; c < nv; c++) {
+      int d = (c + 1) % nv;
+      sa += (double)l->lat[c][0] * l->lat[d][1] - (double)l->lat[d][0] * l->lat[c][1];
+    }
+    if (sa == 0) continue; /* degenerate leaf: nothing to draw */
+    if (sa < 0)
+      for (int c = 0; c < nv / 2; c++) {
+        int32_t t = cid[c];
+        cid[c] = cid[nv - 1 - c];
+        cid[nv - 1 - c] = t;
+      }
+    int64_t rpos[4];
+    int edge_t[4];
+    bd->nring = 0;
+    for (int c = 0; c < nv; c++) {
+      rpos[c] = bd->nring;
+      if (!ring_push(bd, cid[c])) return HR_ERR_NOMEM;
+      edge_t[c] = 0;
+      if (!probe(bd, cid[c], cid[(c + 1) % nv], &edge_t[c])) return HR_ERR_NOMEM;
+    }
+    int64_t r = bd->nring;
+    /* a corner whose two edges hold no T-vertex can be the fan's apex; for quads take the one
+     * whose diagonal joins the closer values (data-dependent diagonal, fewer shading streaks) */
+    int best = -1;
+    double bestd = INFINITY;
+    for (int c = 0; c < nv; c++) {
+      if (edge_t[c] || edge_t[(c + nv - 1) % nv]) continue;
+      double d = 0;
+      if (nv == 4) d = fabs(lum(&bd->val[3 * cid[c]]) - lum(&bd->val[3 * cid[(c + 2) % 4]]));
+      if (d < bestd * (1 - 1e-9)) {
+        bestd = d;
+        best = c;
+      }
+    }
+    if (best >= 0) {
+      int64_t p0 = rpos[best];
+      for (int64_t j = 1; j + 1 < r; j++)
+        if (!emit_tri(bd, vbase, bd->ring[p0], bd->ring[(p0 + j) % r], bd->ring[(p0 + j + 1) % r],
+                      surf, li, emit))
+          return HR_ERR_NOMEM;
+    } else {
+      /* centre vertex: mean of the corners' parameters and values (exact for linear fields) */
+      int32_t cv = (int32_t)bd->nloc++;
+      double ca = 0, cb = 0, cval[3] = {0, 0, 0};
+      for (int c = 0; c < nv; c++) {
+        ca += bd->par[2 * cid[c]];
+        cb += bd->par[2 * cid[c] + 1];
+        for (int ch = 0; ch < 3; ch++) cval[ch] += bd->val[3 * cid[c] + ch];
+      }
+      bd->par[2 * cv] = ca / nv;
+      bd->par[2 * cv + 1] = cb / nv;
+      bd->lat[2 * cv] = bd->lat[2 * cv + 1] = UINT32_MAX; /* not in the lattice map */
+      for (int ch = 0; ch < 3; ch++) bd->val[3 * cv + ch] = cval[ch] / nv;
+      m->ncentre++;
+      for (int64_t j = 0; j < r; j++)
+        if (!emit_tri(bd, vbase, cv, bd->ring[j], bd->ring[(j + 1) % r], surf, li, emit))
+          return HR_ERR_NOMEM;
+    }
+  }
+  /* 4. vertices of this surface */
+  if (vbase + bd->nloc > (int64_t)UINT32_MAX) return HR_ERR_TOO_BIG;
+  if (!verts_grow(bd, vbase + bd->nloc)) return HR_ERR_NOMEM;
+  const double inv = 1.0 / (double)HR_LATTICE;
+  for (int64_t v = 0; v < bd->nloc; v++) {
+    hr_vec3 p = surf_point(f, bd->par[2 * v] * inv, bd->par[2 * v + 1] * inv);
+    float *P = &m->pos[3 * (vbase + v)], *B = &m->B[3 * (vbase + v)];
+    P[0] = (float)p.x;
+    P[1] = (float)p.y;
+    P[2] = (float)p.z;
+    for (int ch = 0; ch < 3; ch++) B[ch] = (float)bd->val[3 * v + ch];
+  }
+  m->nverts = vbase + bd->nloc;
+  return HR_OK;
+}
+
+void hr_mesh_destroy(hr_mesh **pm) {
+  if (!pm || !*pm) return;
+  hr_mesh *m = *pm;
+  free(m->pos);
+  free(m->B);
+  free(m->tri);
+  free(m->tri_surf);
+  free(m->tri_leaf);
+  free(m->tri_emit);
+  free(m);
+  *pm = NULL;
+}
+
+hr_status hr_mesh_build(const hr_scene *s, const hr_leaf *leaves, int64_t n, hr_mesh **out) {
+  *out = NULL;
+  if (!s || n < 0 || (n > 0 && !leaves)) return HR_ERR_INVALID;
+  for (int64_t i = 0; i < n; i++) {
+    const hr_leaf *l = &leaves[i];
+    if (l->surf < 0 || l->surf >= s->nsurfs) return HR_ERR_INVALID;
+    if (l->nverts != s->surfs[l->surf].nverts) return HR_ERR_INVALID;
+    for (int c = 0; c < l->nverts; c++)
+      if (l->lat[c][0] > HR_LATTICE || l->lat[c][1] > HR_LATTICE) return HR_ERR_INVALID;
+  }
+  hr_mesh *m = calloc(1, sizeof *m);
+  int64_t *cnt = calloc((size_t)s->nsurfs + 1, sizeof *cnt);
+  int64_t *idx = malloc((size_t)(n > 0 ? n : 1) * sizeof *idx);
+  int64_t *order = malloc((size_t)(n > 0 ? n : 1) * sizeof *order);
+  build bd;
+  memset(&bd, 0, sizeof bd);
+  bd.m = m;
+  hr_status st = HR_OK;
+  if (!m || !cnt || !idx || !order) {
+    st = HR_ERR_NOMEM;
+    goto done;
+  }
+  /* counting sort by surface, stable */
+  for (int64_t i = 0; i < n; i++) cnt[leaves[i].surf + 1]++;
+  for (int f = 0; f < s->nsurfs; f++) cnt[f + 1] += cnt[f];
+  for (int64_t i = 0; i < n; i++) idx[cnt[leaves[i].surf]++] = i;
+  /* cnt[f] is now the end of surface f */
+  int64_t b = 0;
+  for (int f = 0; f < s->nsurfs && st == HR_OK; f++) {
+    int64_t e = cnt[f];
+    if (e > b) st = build_surface(&bd, s, f, leaves, idx + b, e - b, order);
+    b = e;
+  }
+  if (st == HR_OK) {
+    /* trim */
+    if (m->nverts > 0) {
+      float *p = realloc(m->pos, (size_t)m->nverts * 3 * sizeof *p);
+      if (p) m->pos = p;
+      float *q = realloc(m->B, (size_t)m->nverts * 3 * sizeof *q);
+      if (q) m->B = q;
+    }
+  }
+done:
+  free(cnt);
+  free(idx);
+  free(order);
+  free(bd.val);
+  free(bd.wsum);
+  free(bd.lat);
+  free(bd.par);
+  free(bd.ring);
+  free(bd.map.keys);
+  free(bd.map.vals);
+  if (st != HR_OK) {
+    hr_mesh_destroy(&m);
+    return st;
+  }
+  *out = m;
+  return HR_OK;
+}
+
+/* ------------------------------------------------------------------ exposure */
+
+typedef struct lw {
+  double y, a;
+} lw;
+
+static int cmp_lw(const void *pa, const void *pb) {
+  double a = ((const lw *)pa)->y, b = ((const lw *)pb)->y;
+  return (a > b) - (a < b);
+}
+
+static double tri_area(const hr_mesh *m, int64_t t) {
+  const float *a = &m->pos[3 * m->tri[3 * t]], *b = &m->pos[3 * m->tri[3 * t + 1]],
+              *c = &m->pos[3 * m->tri[3 * t + 2]];
+  hr_vec3 e1 = v3(b[0] - a[0], b[1] - a[1], b[2] - a[2]);
+  hr_vec3 e2 = v3(c[0] - a[0], c[1] - a[1], c[2] - a[2]);
+  return 0.5 * v3_len(v3_cross(e1, e2));
+}
+
+static double vlum(const hr_mesh *m, uint32_t v) {
+  const float *b = &m->B[3 * v];
+  return 0.2126 * b[0] + 0.7152 * b[1] + 0.0722 * b[2];
+}
+
+/* Area-weighted 'q'-quantile of the triangle luminance; 'which' 0 = non-emitting only, 1 = all. */
+static double lum_quantile(const hr_mesh *m, lw *buf, int which, double q) {
+  int64_t k = 0;
+  double total = 0;
+  for (int64_t t = 0; t < m->ntris; t++) {
+    if (which == 0 && m->tri_emit && m->tri_emit[t]) continue;
+    double a = tri_area(m, t);
+    if (!(a > 0)) continue;
+    double y =
+        (vlum(m, m->tri[3 * t]) + vlum(m, m->tri[3 * t + 1]) + vlum(m, m->tri[3 * t + 2])) / 3;
+    if (!isfinite(y)) continue;
+    buf[k].y = y;
+    buf[k].a = a;
+    total += a;
+    k++;
+  }
+  if (k == 0) return 0;
+  qsort(buf, (size_t)k, sizeof *buf, cmp_lw);
+  double acc = 0, lim = q * total;
+  for (int64_t i = 0; i < k; i++) {
+    acc += buf[i].a;
+    if (acc >= lim) return buf[i].y;
+  }
+  return buf[k - 1].y;
+}
+
+double hr_exposure_auto(const hr_mesh *m) {
+  if (!m || m->ntris <= 0) return 1.0;
+  lw *buf = malloc((size_t)m->ntris * sizeof *buf);
+  if (!buf) return 1.0;
+  double y = lum_quantile(m, buf, 0, 0.95);
+  if (!(y > 0)) y = lum_quantile(m, buf, 1, 0.95);
+  if (!(y > 0)) y = lum_quantile(m, buf, 1, 1.0);
+  free(buf);
+  if (!(y > 0) || !isfinite(y)) return 1.0;
+  return 0.8 / y;
+}
+
+/* ------------------------------------------------------------------ little-endian packing */
+
+static void put_u32(uint8_t *p, uint32_t v) {
+  p[0] = (uint8_t)v;
+  p[1] = (uint8_t)(v >> 8);
+  p[2] = (uint8_t)(v >> 16);
+  p[3] = (uint8_t)(v >> 24);
+}
+
+static void put_f32(uint8_t *p, float f) {
+  uint32_t u;
+  memcpy(&u, &f, 4);
+  put_u32(p, u);
+}
+
+/* ------------------------------------------------------------------ PLY */
+
+hr_status hr_ply_write(const char *path, const hr_mesh *m, double exposure, hr_err *err) {
+  if (!m || !path) return hr_err_set(err, HR_ERR_INVALID, "hr_ply_write: no mesh or path");
+  if (!isfinite(exposure) || exposure < 0)
+    return hr_err_set(err, HR_ERR_INVALID, "%s: bad exposure %g", path, exposure);
+  FILE *fp = fopen(path, "wb");
+  if (!fp) return hr_err_set(err, HR_ERR_IO, "%s: cannot open for writing", path);
+  fprintf(fp,
+          "ply\nformat binary_little_endian 1.0\n"
+          "comment generated by hrad (hierarchical radiosity)\n"
+          "comment red green blue: 8-bit sRGB of radiosity * exposure, clamped\n"
+          "comment radiosity_r radiosity_g radiosity_b: linear radiosity B (no exposure)\n"
+          "comment exposure %.17g\n"
+          "element vertex %lld\n"
+          "property float x\nproperty float y\nproperty float z\n"
+          "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+          "property float radiosity_r\nproperty float radiosity_g\nproperty float radiosity_b\n"
+          "element face %lld\n"
+          "property list uchar int vertex_indices\n"
+          "end_header\n",
+          exposure, (long long)m->nverts, (long long)m->ntris);
+  enum { VREC = 12 + 3 + 12, FREC = 13, CHUNK = 4096 };
+  uint8_t buf[CHUNK * VREC];
+  int ok = 1;
+  for (int64_t v0 = 0; v0 < m->nverts && ok; v0 += CHUNK) {
+    int64_t v1 = v0 + CHUNK < m->nverts ? v0 + CHUNK : m->nverts;
+    uint8_t *p = buf;
+    for (int64_t v = v0; v < v1; v++, p += VREC) {
+      for (int c = 0; c < 3; c++) put_f32(p + 4 * c, m->pos[3 * v + c]);
+      for (int c = 0; c < 3; c++) p[12 + c] = hr_tonemap8(m->B[3 * v + c], exposure);
+      for (int c = 0; c < 3; c++) put_f32(p + 15 + 4 * c, m->B[3 * v + c]);
+    }
+    ok = fwrite(buf, 1, (size_t)(p - buf), fp) == (size_t)(p - buf);
+  }
+  for (int64_t t0 = 0; t0 < m->ntris && ok; t0 += CHUNK) {
+    int64_t t1 = t0 + CHUNK < m->ntris ? t0 + CHUNK : m->ntris;
+    uint8_t *p = buf;
+    for (int64_t t = t0; t < t1; t++, p += FREC) {
+      p[0] = 3;
+      for (int c = 0; c < 3; c++) put_u32(p + 1 + 4 * c, m->tri[3 * t + c]);
+    }
+    ok = fwrite(buf, 1, (size_t)(p - buf), fp) == (size_t)(p - buf);
+  }
+  if (fclose(fp) != 0) ok = 0;
+  if (!ok) return hr_err_set(err, HR_ERR_IO, "%s: write failed", path);
+  return HR_OK;
+}
+
+/* ------------------------------------------------------------------ GLB */
+
+typedef struct sbuf {
+  char *s;
+  size_t len, cap;
+  int nomem;
+} sbuf;
+
+static void sb_printf(sbuf *b, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 2, 3)))
+#endif
+    ;
+
+static void sb_printf(sbuf *b, const char *fmt, ...) {
+  if (b->nomem) return;
+  for (;;) {
+    va_list ap;
+    va_start(ap, fmt);
+    int k = vsnprintf(b->s ? b->s + b->len : NULL, b->s ? b->cap - b->len : 0, fmt, ap);
+    va_end(ap);
+    if (k < 0) {
+      b->nomem = 1;
+      return;
+    }
+    if (b->s && b->len + (size_t)k < b->cap) {
+      b->len += (size_t)k;
+      return;
+    }
+    size_t nc = b->cap ? b->cap : 1024;
+    while (nc <= b->len + (size_t)k) nc *= 2;
+    char *q = realloc(b->s, nc);
+    if (!q) {
+      b->nomem = 1;
+      return;
+    }
+    b->s = q;
+    b->cap = nc;
+  }
+}
+
+hr_status hr_glb_write(const char *path, const hr_mesh *m, double exposure, hr_err *err) {
+  if (!m || !path) return hr_err_set(err, HR_ERR_INVALID, "hr_glb_write: no mesh or path");
+  if (!isfinite(exposure) || exposure < 0)
+    return hr_err_set(err, HR_ERR_INVALID, "%s: bad exposure %g", path, exposure);
+  int has = m->nverts > 0 && m->ntris > 0;
+  size_t npos = has ? (size_t)m->nverts * 12 : 0, ncol = npos;
+  size_t nidx = has ? (size_t)m->ntris * 12 : 0;
+  size_t binlen = npos + ncol + nidx; /* all multiples of 4 */
+  sbuf j = {0};
+  sb_printf(&j,
+            "{\"asset\":{\"version\":\"2.0\",\"generator\":\"hrad\","
+            "\"extras\":{\"exposure\":%.17g,\"colors\":\"COLOR_0 = linear radiosity * exposure, "
+            "clamped to [0,1]\"}},",
+            exposure);
+  if (!has) {
+    j.len--; /* an empty model: the asset alone */
+    sb_printf(&j, "}");
+  } else {
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int64_t v = 0; v < m->nverts; v++)
+      for (int c = 0; c < 3; c++) {
+        float x = m->pos[3 * v + c];
+        if (x < lo[c]) lo[c] = x;
+        if (x > hi[c]) hi[c] = x;
+      }
+    sb_printf(
+        &j,
+        "\"extensionsUsed\":[\"KHR_materials_unlit\"],"
+        "\"scene\":0,\"scenes\":[{\"nodes\":[0]}],"
+        "\"nodes\":[{\"mesh\":0,\"name\":\"hrad\"}],"
+        "\"meshes\":[{\"name\":\"radiosity\",\"primitives\":[{\"attributes\":"
+        "{\"POSITION\":0,\"COLOR_0\":1},\"indices\":2,\"material\":0,\"mode\":4}],"
+        "\"extras\":{\"exposure\":%.17g}}],"
+        "\"materials\":[{\"name\":\"radiosity\",\"pbrMetallicRoughness\":"
+        "{\"baseColorFactor\":[1,1,1,1],\"metallicFactor\":0,\"roughnessFactor\":1},"
+        "\"doubleSided\":false,\"extensions\":{\"KHR_materials_unlit\":{}}}],"
+        "\"buffers\":[{\"byteLength\":%zu}],"
+        "\"bufferViews\":["
+        "{\"buffer\":0,\"byteOffset\":0,\"byteLength\":%zu,\"byteStride\":12,\"target\":34962},"
+        "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"byteStride\":12,\"target\":34962},"
+        "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"target\":34963}],"
+        "\"accessors\":["
+        "{\"bufferView\":0,\"componentType\":5126,\"count\":%lld,\"type\":\"VEC3\","
+        "\"min\":[%.17g,%.17g,%.17g],\"max\":[%.17g,%.17g,%.17g]},"
+        "{\"bufferView\":1,\"componentType\":5126,\"count\":%lld,\"type\":\"VEC3\"},"
+        "{\"bufferView\":2,\"componentType\":5125,\"count\":%lld,\"type\":\"SCALAR\"}]}",
+        exposure, binlen, npos, npos, ncol, npos + ncol, nidx, (long long)m->nverts, (double)lo[0],
+        (double)lo[1], (double)lo[2], (double)hi[0], (double)hi[1], (double)hi[2],
+        (long long)m->nverts, (long long)3 * m->ntris);
+  }
+  if (j.nomem) {
+    free(j.s);
+    return hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
+  }
+  size_t jlen = (j.len + 3) & ~(size_t)3;
+  size_t total = 12 + 8 + jlen + (has ? 8 + binlen : 0);
+  if (total > UINT32_MAX) {
+    free(j.s);
+    return hr_err_set(err, HR_ERR_TOO_BIG, "%s: mesh too large for GLB (%zu bytes)", path, total);
+  }
+  FILE *fp = fopen(path, "wb");
+  if (!fp) {
+    free(j.s);
+    return hr_err_set(err, HR_ERR_IO, "%s: cannot open for writing", path);
+  }
+  uint8_t hdr[20];
+  put_u32(hdr, 0x46546C67u); /* "glTF" */
+  put_u32(hdr + 4, 2);
+  put_u32(hdr + 8, (uint32_t)total);
+  put_u32(hdr + 12, (uint32_t)jlen);
+  put_u32(hdr + 16, 0x4E4F534Au); /* "JSON" */
+  int ok = fwrite(hdr, 1, 20, fp) == 20 && fwrite(j.s, 1, j.len, fp) == j.len;
+  for (size_t i = j.len; i < jlen && ok; i++) ok = fputc(' ', fp) != EOF;
+  free(j.s);
+  if (has && ok) {
+    uint8_t ch[8];
+    put_u32(ch, (uint32_t)binlen);
+    put_u32(ch + 4, 0x004E4942u); /* "BIN\0" */
+    ok = fwrite(ch, 1, 8, fp) == 8;
+    enum { CHUNK = 4096 };
+    uint8_t buf[CHUNK * 12];
+    for (int pass = 0; pass < 2 && ok; pass++)
+      for (int64_t v0 = 0; v0 < m->nverts && ok; v0 += CHUNK) {
+        int64_t v1 = v0 + CHUNK < m->nverts ? v0 + CHUNK : m->nverts;
+        uint8_t *p = buf;
+        for (int64_t v = v0; v < v1; v++)
+          for (int c = 0; c < 3; c++, p += 4) {
+            float x;
+            if (pass == 0) {
+              x = m->pos[3 * v + c];
+            } else {
+              x = (float)(m->B[3 * v + c] * exposure);
+              if (!(x > 0)) x = 0; /* also NaN */
+              if (x > 1) x = 1;
+            }
+            put_f32(p, x);
+          }
+        ok = fwrite(buf, 1, (size_t)(p - buf), fp) == (size_t)(p - buf);
+      }
+    for (int64_t t0 = 0; t0 < m->ntris && ok; t0 += CHUNK) {
+      int64_t t1 = t0 + CHUNK < m->ntris ? t0 + CHUNK : m->ntris;
+      uint8_t *p = buf;
+      for (int64_t t = t0; t < t1; t++)
+        for (int c = 0; c < 3; c++, p += 4) put_u32(p, m->tri[3 * t + c]);
+      ok = fwrite(buf, 1, (size_t)(p - buf), fp) == (size_t)(p - buf);
+    }
+  }
+  if (fclose(fp) != 0) ok = 0;
+  if (!ok) return hr_err_set(err, HR_ERR_IO, "%s: write failed", path);
+  return HR_OK;
+}

@@ -1,0 +1,414 @@
+/* vis.c: segment visibility (paper 1.2, the rays that estimate H_ij).
+ *
+ * hr_vis_segments casts the segments with Embree 3: one quad geometry holds every surface
+ * (a triangle is a quad whose last vertex repeats the third), so Embree's primID is the surface
+ * id. Hits on the two skipped surfaces are rejected by a context filter function that is only
+ * installed when a skip id is given. Segments go in packets of 16 (COHERENT context), smaller
+ * remainders in packets of 8 or 4, a single one with rtcOccluded1.
+ *
+ * hr_vis_segments_cand / hr_vis_segments_ref are exact double-precision segment/convex polygon
+ * tests: a segment is blocked by a polygon when it crosses the polygon's plane at t in
+ * [HR_VIS_EPS, 1 - HR_VIS_EPS] inside the closed polygon. Segments lying in a polygon's plane do
+ * not hit it (grazing). Both faces block. */
+#include "vis.h"
+#include "vec.h"
+
+#include <embree3/rtcore.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Build settings (overridable when compiling the benchmark). */
+#ifndef HR_VIS_BUILD_QUALITY
+#define HR_VIS_BUILD_QUALITY RTC_BUILD_QUALITY_HIGH
+#endif
+#ifndef HR_VIS_SCENE_FLAGS
+#define HR_VIS_SCENE_FLAGS RTC_SCENE_FLAG_NONE
+#endif
+
+struct hr_vis {
+  RTCDevice dev;
+  RTCScene scene;
+  int nsurfs;
+};
+
+/* ------------------------------------------------------------------ Embree errors */
+
+typedef struct {
+  hr_err *err;
+  int failed;
+  enum RTCError code;
+} err_sink;
+
+static const char *rtc_err_name(enum RTCError e) {
+  switch (e) {
+  case RTC_ERROR_NONE: return "no error";
+  case RTC_ERROR_UNKNOWN: return "unknown error";
+  case RTC_ERROR_INVALID_ARGUMENT: return "invalid argument";
+  case RTC_ERROR_INVALID_OPERATION: return "invalid operation";
+  case RTC_ERROR_OUT_OF_MEMORY: return "out of memory";
+  case RTC_ERROR_UNSUPPORTED_CPU: return "unsupported CPU";
+  case RTC_ERROR_CANCELLED: return "cancelled";
+  }
+  return "error";
+}
+
+/* Error callback while building: remembers the first error as an hr_err message. */
+static void on_build_error(void *ud, enum RTCError code, const char *str) {
+  err_sink *sink = ud;
+  if (!sink || sink->failed) return;
+  sink->failed = 1;
+  sink->code = code;
+  hr_err_set(sink->err, code == RTC_ERROR_OUT_OF_MEMORY ? HR_ERR_NOMEM : HR_ERR_INVALID,
+             "embree: %s%s%s", rtc_err_name(code), str ? ": " : "", str ? str : "");
+}
+
+/* Error callback after building: queries on a committed scene do not fail; swallow anything
+ * rather than letting Embree print. */
+static void on_query_error(void *ud, enum RTCError code, const char *str) {
+  (void)ud;
+  (void)code;
+  (void)str;
+}
+
+void hr_vis_destroy(hr_vis **pv) {
+  if (!pv || !*pv) return;
+  hr_vis *v = *pv;
+  if (v->scene) rtcReleaseScene(v->scene);
+  if (v->dev) rtcReleaseDevice(v->dev);
+  free(v);
+  *pv = NULL;
+}
+
+/* ------------------------------------------------------------------ skip filter */
+
+typedef struct {
+  struct RTCIntersectContext ctx; /* must be first: Embree hands back a pointer to it */
+  unsigned skip_a, skip_b;
+} vis_ctx;
+
+/* Rejects hits whose primitive (= surface id) is one of the context's skipped surfaces. */
+static void skip_filter(const struct RTCFilterFunctionNArguments *args) {
+  const vis_ctx *c = (const vis_ctx *)args->context;
+  const unsigned N = args->N;
+  /* RTCHitN layout: Ng_x, Ng_y, Ng_z, u, v, primID, geomID, ... each N wide. */
+  const unsigned *prim = (const unsigned *)args->hit + 5 * N;
+  for (unsigned i = 0; i < N; i++) {
+    if (args->valid[i] == 0) continue;
+    if (prim[i] == c->skip_a || prim[i] == c->skip_b) args->valid[i] = 0;
+  }
+}
+
+static void ctx_init(vis_ctx *c, int skip_a, int skip_b, int coherent) {
+  rtcInitIntersectContext(&c->ctx);
+  c->ctx.flags = coherent ? RTC_INTERSECT_CONTEXT_FLAG_COHERENT
+                          : RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+  c->skip_a = skip_a >= 0 ? (unsigned)skip_a : RTC_INVALID_GEOMETRY_ID;
+  c->skip_b = skip_b >= 0 ? (unsigned)skip_b : RTC_INVALID_GEOMETRY_ID;
+  c->ctx.filter = (skip_a >= 0 || skip_b >= 0) ? skip_filter : NULL;
+}
+
+/* ------------------------------------------------------------------ build */
+
+hr_status hr_vis_create(const hr_scene *s, hr_vis **out, hr_err *err) {
+  *out = NULL;
+  hr_vis *v = calloc(1, sizeof *v);
+  if (!v) return hr_err_set(err, HR_ERR_NOMEM, "out of memory creating the ray caster");
+  v->nsurfs = s->nsurfs;
+  err_sink sink = {err, 0, RTC_ERROR_NONE};
+  v->dev = rtcNewDevice("threads=1");
+  if (!v->dev) {
+    enum RTCError code = rtcGetDeviceError(NULL);
+    hr_vis_destroy(&v);
+    return hr_err_set(err, code == RTC_ERROR_OUT_OF_MEMORY ? HR_ERR_NOMEM : HR_ERR_INVALID,
+                      "embree: cannot create device: %s", rtc_err_name(code));
+  }
+  rtcSetDeviceErrorFunction(v->dev, on_build_error, &sink);
+  v->scene = rtcNewScene(v->dev);
+  if (v->scene) {
+    rtcSetSceneFlags(v->scene, RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION | HR_VIS_SCENE_FLAGS);
+    rtcSetSceneBuildQuality(v->scene, HR_VIS_BUILD_QUALITY);
+  }
+  if (v->scene && s->nsurfs > 0) {
+    RTCGeometry g = rtcNewGeometry(v->dev, RTC_GEOMETRY_TYPE_QUAD);
+    float *vb = NULL;
+    unsigned *ib = NULL;
+    if (g) {
+      rtcSetGeometryBuildQuality(g, HR_VIS_BUILD_QUALITY);
+      vb = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                   3 * sizeof(float), (size_t)s->nsurfs * 4);
+      ib = rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4,
+                                   4 * sizeof(unsigned), (size_t)s->nsurfs);
+    }
+    if (vb && ib) {
+      for (int i = 0; i < s->nsurfs; i++) {
+        const hr_surface *f = &s->surfs[i];
+        for (int k = 0; k < 4; k++) {
+          const hr_vec3 p = f->v[k < f->nverts ? k : f->nverts - 1];
+          float *q = vb + ((size_t)i * 4 + (size_t)k) * 3;
+          q[0] = (float)p.x;
+          q[1] = (float)p.y;
+          q[2] = (float)p.z;
+        }
+        unsigned b = (unsigned)i * 4u;
+        ib[(size_t)i * 4 + 0] = b;
+        ib[(size_t)i * 4 + 1] = b + 1;
+        ib[(size_t)i * 4 + 2] = b + 2;
+        ib[(size_t)i * 4 + 3] = f->nverts == 4 ? b + 3 : b + 2;
+      }
+      rtcCommitGeometry(g);
+      rtcAttachGeometryByID(v->scene, g, 0);
+    }
+    if (g) rtcReleaseGeometry(g);
+  }
+  if (v->scene) rtcCommitScene(v->scene);
+  if (!v->scene || sink.failed) {
+    hr_status st = sink.code == RTC_ERROR_OUT_OF_MEMORY ? HR_ERR_NOMEM : HR_ERR_INVALID;
+    if (!sink.failed) hr_err_set(err, st, "embree: cannot build the scene");
+    hr_vis_destroy(&v);
+    return st;
+  }
+  rtcSetDeviceErrorFunction(v->dev, on_query_error, NULL);
+  *out = v;
+  return HR_OK;
+}
+
+/* ------------------------------------------------------------------ Embree queries */
+
+#define FILL_LANE(R, k, i)                                                                    \
+  do {                                                                                        \
+    const float *o_ = org + 3 * (size_t)(i), *d_ = dst + 3 * (size_t)(i);                     \
+    (R).org_x[k] = o_[0];                                                                     \
+    (R).org_y[k] = o_[1];                                                                     \
+    (R).org_z[k] = o_[2];                                                                     \
+    (R).dir_x[k] = d_[0] - o_[0];                                                             \
+    (R).dir_y[k] = d_[1] - o_[1];                                                             \
+    (R).dir_z[k] = d_[2] - o_[2];                                                             \
+    (R).tnear[k] = (float)HR_VIS_EPS;                                                         \
+    (R).tfar[k] = (float)(1.0 - HR_VIS_EPS);                                                  \
+    (R).time[k] = 0.0f;                                                                       \
+    (R).mask[k] = 0xFFFFFFFFu;                                                                \
+    (R).id[k] = (unsigned)(k);                                                                \
+    (R).flags[k] = 0;                                                                         \
+  } while (0)
+
+static void occluded16(const hr_vis *v, vis_ctx *c, int cnt, const float *org, const float *dst,
+                       uint8_t *vis) {
+  struct RTCRay16 r; /* RTC_ALIGN(64) in the header: 64-byte aligned on the stack */
+  _Alignas(64) int valid[16]; /* Embree loads the mask with aligned vector loads */
+  for (int k = 0; k < 16; k++) {
+    int i = k < cnt ? k : cnt - 1; /* inactive lanes repeat a valid ray (finite data) */
+    FILL_LANE(r, k, i);
+    valid[k] = k < cnt ? -1 : 0;
+  }
+  rtcOccluded16(valid, v->scene, &c->ctx, &r);
+  for (int k = 0; k < cnt; k++) vis[k] = r.tfar[k] >= 0.0f;
+}
+
+static void occluded8(const hr_vis *v, vis_ctx *c, int cnt, const float *org, const float *dst,
+                      uint8_t *vis) {
+  struct RTCRay8 r;
+  _Alignas(32) int valid[8];
+  for (int k = 0; k < 8; k++) {
+    int i = k < cnt ? k : cnt - 1;
+    FILL_LANE(r, k, i);
+    valid[k] = k < cnt ? -1 : 0;
+  }
+  rtcOccluded8(valid, v->scene, &c->ctx, &r);
+  for (int k = 0; k < cnt; k++) vis[k] = r.tfar[k] >= 0.0f;
+}
+
+static void occluded4(const hr_vis *v, vis_ctx *c, int cnt, const float *org, const float *dst,
+                      uint8_t *vis) {
+  struct RTCRay4 r;
+  _Alignas(16) int valid[4];
+  for (int k = 0; k < 4; k++) {
+    int i = k < cnt ? k : cnt - 1;
+    FILL_LANE(r, k, i);
+    valid[k] = k < cnt ? -1 : 0;
+  }
+  rtcOccluded4(valid, v->scene, &c->ctx, &r);
+  for (int k = 0; k < cnt; k++) vis[k] = r.tfar[k] >= 0.0f;
+}
+
+static void occluded1(const hr_vis *v, vis_ctx *c, const float *o, const float *d, uint8_t *vis) {
+  struct RTCRay r;
+  r.org_x = o[0];
+  r.org_y = o[1];
+  r.org_z = o[2];
+  r.dir_x = d[0] - o[0];
+  r.dir_y = d[1] - o[1];
+  r.dir_z = d[2] - o[2];
+  r.tnear = (float)HR_VIS_EPS;
+  r.tfar = (float)(1.0 - HR_VIS_EPS);
+  r.time = 0.0f;
+  r.mask = 0xFFFFFFFFu;
+  r.id = 0;
+  r.flags = 0;
+  rtcOccluded1(v->scene, &c->ctx, &r);
+  *vis = r.tfar >= 0.0f;
+}
+
+/* Packet width policy: 0 = adaptive (16, then 8/4/1 for the remainder), 1/4/8/16 = fixed width
+ * (a fixed width > 1 masks the unused lanes of the last packet). Used by the benchmark. */
+static void vis_segments_mode(const hr_vis *v, int n, const float *org, const float *dst,
+                              int skip_a, int skip_b, uint8_t *vis, int mode) {
+  if (n <= 0) return;
+  vis_ctx c;
+  ctx_init(&c, skip_a, skip_b, 1);
+  for (int i = 0; i < n;) {
+    int left = n - i, w;
+    if (mode == 0)
+      w = left > 8 ? 16 : left > 4 ? 8 : left > 1 ? 4 : 1;
+    else
+      w = mode;
+    int cnt = left < w ? left : w;
+    const float *o = org + 3 * (size_t)i, *d = dst + 3 * (size_t)i;
+    switch (w) {
+    case 16: occluded16(v, &c, cnt, o, d, vis + i); break;
+    case 8: occluded8(v, &c, cnt, o, d, vis + i); break;
+    case 4: occluded4(v, &c, cnt, o, d, vis + i); break;
+    default:
+      c.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+      occluded1(v, &c, o, d, vis + i);
+      c.ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+      cnt = 1;
+      break;
+    }
+    i += cnt;
+  }
+}
+
+void hr_vis_segments(const hr_vis *v, int n, const float *org, const float *dst, int skip_a,
+                     int skip_b, uint8_t *vis) {
+  vis_segments_mode(v, n, org, dst, skip_a, skip_b, vis, 0);
+}
+
+/* ------------------------------------------------------------------ exact tests */
+
+/* A polygon prepared for segment tests: plane n.x = d (n unit), inward edge normals e[k] with
+ * e[k].x >= c[k] inside. */
+typedef struct {
+  double nx, ny, nz, d;
+  double ex[4], ey[4], ez[4], c[4];
+  int nv;
+} poly_pre;
+
+static void poly_prepare(const hr_surface *f, poly_pre *p) {
+  hr_vec3 n = f->normal;
+  p->nx = n.x;
+  p->ny = n.y;
+  p->nz = n.z;
+  p->d = v3_dot(n, f->v[0]);
+  p->nv = f->nverts;
+  for (int k = 0; k < f->nverts; k++) {
+    hr_vec3 a = f->v[k], b = f->v[(k + 1) % f->nverts];
+    hr_vec3 e = v3_cross(n, v3_sub(b, a));
+    p->ex[k] = e.x;
+    p->ey[k] = e.y;
+    p->ez[k] = e.z;
+    p->c[k] = v3_dot(e, a);
+  }
+}
+
+/* 1 when segment o + t*dir (t in [HR_VIS_EPS, 1-HR_VIS_EPS]) crosses the closed polygon; 'so'
+ * and 'se' are the signed plane distances of the two ends (so * se < 0 already checked). */
+static int poly_cross(const poly_pre *p, const double o[3], const double dir[3], double so,
+                      double se) {
+  double t = so / (so - se);
+  if (!(t >= HR_VIS_EPS && t <= 1.0 - HR_VIS_EPS)) return 0;
+  double x = o[0] + t * dir[0], y = o[1] + t * dir[1], z = o[2] + t * dir[2];
+  for (int k = 0; k < p->nv; k++)
+    if (p->ex[k] * x + p->ey[k] * y + p->ez[k] * z < p->c[k]) return 0;
+  return 1;
+}
+
+/* Candidates are prepared in chunks of CHUNK on the stack; any number of chunks. */
+#define CHUNK 64
+
+typedef struct {
+  poly_pre p[CHUNK];
+  double nx[CHUNK], ny[CHUNK], nz[CHUNK], d[CHUNK];
+  int n;
+} chunk_t;
+
+static void chunk_add(chunk_t *ch, const hr_surface *f) {
+  poly_pre *p = &ch->p[ch->n];
+  poly_prepare(f, p);
+  ch->nx[ch->n] = p->nx;
+  ch->ny[ch->n] = p->ny;
+  ch->nz[ch->n] = p->nz;
+  ch->d[ch->n] = p->d;
+  ch->n++;
+}
+
+/* Tests the still-visible segments against one chunk. */
+static void chunk_test(const chunk_t *ch, int n, const float *org, const float *dst,
+                       uint8_t *vis) {
+  for (int i = 0; i < n; i++) {
+    if (!vis[i]) continue;
+    const double o[3] = {org[3 * (size_t)i], org[3 * (size_t)i + 1], org[3 * (size_t)i + 2]};
+    const double e[3] = {dst[3 * (size_t)i], dst[3 * (size_t)i + 1], dst[3 * (size_t)i + 2]};
+    const double dir[3] = {e[0] - o[0], e[1] - o[1], e[2] - o[2]};
+    double prod[CHUNK];
+    const int m = ch->n;
+    for (int k = 0; k < m; k++) {
+      double so = ch->nx[k] * o[0] + ch->ny[k] * o[1] + ch->nz[k] * o[2] - ch->d[k];
+      double se = ch->nx[k] * e[0] + ch->ny[k] * e[1] + ch->nz[k] * e[2] - ch->d[k];
+      prod[k] = so * se;
+    }
+    for (int k = 0; k < m; k++) {
+      if (!(prod[k] < 0)) continue;
+      const poly_pre *p = &ch->p[k];
+      double so = p->nx * o[0] + p->ny * o[1] + p->nz * o[2] - p->d;
+      double se = p->nx * e[0] + p->ny * e[1] + p->nz * e[2] - p->d;
+      if (poly_cross(p, o, dir, so, se)) {
+        vis[i] = 0;
+        break;
+      }
+    }
+  }
+}
+
+static int any_visible(int n, const uint8_t *vis) {
+  for (int i = 0; i < n; i++)
+    if (vis[i]) return 1;
+  return 0;
+}
+
+void hr_vis_segments_cand(const hr_scene *s, const int32_t *cand, int ncand, int n,
+                          const float *org, const float *dst, int skip_a, int skip_b,
+                          uint8_t *vis) {
+  if (n <= 0) return;
+  memset(vis, 1, (size_t)n);
+  chunk_t ch;
+  ch.n = 0;
+  for (int j = 0; j < ncand; j++) {
+    int id = cand[j];
+    if (id == skip_a || id == skip_b || id < 0 || id >= s->nsurfs) continue;
+    chunk_add(&ch, &s->surfs[id]);
+    if (ch.n == CHUNK) {
+      chunk_test(&ch, n, org, dst, vis);
+      ch.n = 0;
+      if (!any_visible(n, vis)) return;
+    }
+  }
+  if (ch.n) chunk_test(&ch, n, org, dst, vis);
+}
+
+void hr_vis_segments_ref(const hr_scene *s, int n, const float *org, const float *dst,
+                         int skip_a, int skip_b, uint8_t *vis) {
+  if (n <= 0) return;
+  memset(vis, 1, (size_t)n);
+  chunk_t ch;
+  ch.n = 0;
+  for (int id = 0; id < s->nsurfs; id++) {
+    if (id == skip_a || id == skip_b) continue;
+    chunk_add(&ch, &s->surfs[id]);
+    if (ch.n == CHUNK) {
+      chunk_test(&ch, n, org, dst, vis);
+      ch.n = 0;
+    }
+  }
+  if (ch.n) chunk_test(&ch, n, org, dst, vis);
+}
