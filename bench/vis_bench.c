@@ -146,14 +146,14 @@ static double rate_embree(const hr_vis *v, workload *w, int mode, int skip, doub
 }
 
 /* Stream API for comparison: rtcOccluded1M on the link's rays (INCOHERENT). */
-static double rate_stream(const hr_vis *v, workload *w) {
+static double rate_stream(const hr_vis *v, workload *w, int coherent) {
   struct RTCRay *rays = aligned_alloc(64, sizeof(struct RTCRay) * (size_t)w->R + 64);
   double best = 1e30;
   for (int rep = 0; rep < 3; rep++) {
     double t0 = now_s();
     for (int l = 0; l < w->L; l++) {
       vis_ctx c;
-      ctx_init(&c, w->a[l], w->b[l], 0);
+      ctx_init(&c, v, w->a[l], w->b[l], coherent);
       for (int i = 0; i < w->R; i++) {
         const float *o = w->org + 3 * ((size_t)l * w->R + i), *d = w->dst + 3 * ((size_t)l * w->R + i);
         struct RTCRay *r = &rays[i];
@@ -204,12 +204,14 @@ int main(int argc, char **argv) {
     printf(", packet8 %.2f", rate_embree(v, &w16, 8, 1, NULL));
     printf(", packet4 %.2f", rate_embree(v, &w16, 4, 1, NULL));
     printf(", scalar rtcOccluded1 %.2f", rate_embree(v, &w16, 1, 1, NULL));
-    printf(", stream 1M %.2f\n", rate_stream(v, &w16));
+    printf(", stream 1M %.2f, stream 1M coherent %.2f\n", rate_stream(v, &w16, 0),
+           rate_stream(v, &w16, 1));
     printf("Embree, 4 rays/link: adaptive(packet4) %.2f Mrays/s", rate_embree(v, &w4, 0, 1, &bl));
     printf(" (blocked %.0f%%)", 100 * bl);
     printf(", packet16 masked %.2f", rate_embree(v, &w4, 16, 1, NULL));
     printf(", scalar %.2f", rate_embree(v, &w4, 1, 1, NULL));
-    printf(", stream 1M %.2f\n", rate_stream(v, &w4));
+    printf(", stream 1M %.2f, stream 1M coherent %.2f\n", rate_stream(v, &w4, 0),
+           rate_stream(v, &w4, 1));
 
     /* shaft lists for these links */
     int32_t *cand = NULL;

@@ -531,7 +531,7 @@ static void build_museum(bld *b) {
       if (h == MU_CENTRE && k > 0) mu_atrium(b, &m, k, x0, x1);
     }
   /* On the first-floor north gallery behind the parapet, looking across and down the atrium. */
-  set_camera(b->s, v3(19.8, mu_floor_y(1) + 1.7, 8.3), v3(27.0, 1.5, 19.5), 70);
+  set_camera(b->s, v3(20.0, mu_floor_y(1) + 1.8, 8.25), v3(27.0, 1.0, 19.0), 70);
 }
 
 /* ---------------------------------------------------------------- cornell */

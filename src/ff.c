@@ -69,7 +69,9 @@ double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
       dst[3 * q + 1] = (float)t.y;
       dst[3 * q + 2] = (float)t.z;
     }
-    if (ncand <= CAND_BRUTE_MAX)
+    if (ncand < 0)
+      hr_vis_segments(s->vis, n, org, dst, a->surf, b->surf, vis);
+    else if (ncand <= CAND_BRUTE_MAX)
       hr_vis_segments_cand(s->scene, cand, ncand, n, org, dst, a->surf, b->surf, vis);
     else
       hr_vis_segments(s->vis, n, org, dst, a->surf, b->surf, vis);

@@ -114,17 +114,21 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
       for (int j = i + 1; j < n; j++) {
         const hr_surface *b = &sc->surfs[j];
         if (!in_front(a, b) || !in_front(b, a)) continue;
+        /* The k segments are first cast against the whole scene: most pairs of a large scene
+         * are hidden from each other, and for them the shaft query would be wasted. A pair all
+         * of whose k segments are blocked is taken as mutually invisible. The conservative
+         * candidate list gives the same H, so H is not cast again. */
+        double h = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, &rw->rays);
+        if (h == 0) continue;
         ntmp = 0;
         if (hr_shaft_candidates(s->shaft, a->v, a->nverts, i, b->v, b->nverts, j, &tmp, &ntmp,
                                 &captmp) != HR_OK) {
           rw->err = 1;
           break;
         }
+        if (ntmp == 0) h = 1.0; /* nothing can block: exact */
         double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
         double fji = hr_ff_unoccluded(s, &s->el[j], &s->el[i]);
-        double h = hr_ff_visibility(s, &s->el[i], &s->el[j], tmp, ntmp, &rw->rays);
-        /* A pair all of whose k segments are blocked is taken as mutually invisible. */
-        if (h == 0) continue;
         if (rw->nlinks + 2 > rw->cap) {
           int nc = rw->cap ? rw->cap * 2 : 16;
           hr_link *l = realloc(rw->links, (size_t)nc * sizeof *l);
@@ -146,7 +150,7 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
           rw->cand = c;
           rw->capc = nc;
         }
-        memcpy(rw->cand + rw->ncand, tmp, (size_t)ntmp * sizeof *tmp);
+        if (ntmp > 0) memcpy(rw->cand + rw->ncand, tmp, (size_t)ntmp * sizeof *tmp);
         /* Both directions share one candidate list (offset relative to the row for now). */
         hr_link lij = {i, j, (float)(fij * h), (float)h, (uint32_t)rw->ncand, ntmp};
         hr_link lji = {j, i, (float)(fji * h), (float)h, (uint32_t)rw->ncand, ntmp};
@@ -175,7 +179,8 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
         l.cand_off += (uint32_t)oc;
         s->links[ol++] = l;
       }
-      memcpy(s->pool + oc, rows[i].cand, (size_t)rows[i].ncand * sizeof(int32_t));
+      if (rows[i].ncand > 0)
+        memcpy(s->pool + oc, rows[i].cand, (size_t)rows[i].ncand * sizeof(int32_t));
       oc += rows[i].ncand;
     }
     s->nlinks = nl;
@@ -336,7 +341,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     int64_t o = 0;
     for (int64_t i = 0; i < s->nlinks; i++) {
       hr_link *l = &s->links[i];
-      memcpy(np + o, s->pool + l->cand_off, (size_t)l->ncand * sizeof *np);
+      if (l->ncand > 0) memcpy(np + o, s->pool + l->cand_off, (size_t)l->ncand * sizeof *np);
       l->cand_off = (uint32_t)o;
       o += l->ncand;
     }

@@ -81,7 +81,8 @@ double hr_elem_rho_max(const hr_solver *s, const hr_elem *e);
  * the denominator); 0 when the elements face away at their centres. */
 double hr_ff_unoccluded(const hr_solver *s, const hr_elem *r, const hr_elem *j);
 /* Visible fraction H between elements a and b with candidate list 'cand' (0 candidates: 1, no
- * rays). Symmetric: H(a,b) == H(b,a) exactly. Adds the number of rays cast to *rays. */
+ * rays; ncand < 0: no list, rays against the whole scene). Symmetric: H(a,b) == H(b,a) exactly.
+ * Adds the number of rays cast to *rays. */
 double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
                         const int32_t *cand, int ncand, int64_t *rays);
 /* Counter-based hash of (seed, a, b, i): the only source of randomness. */
