@@ -1,14 +1,23 @@
 /* mesh.c: vertex reconstruction from the leaf elements (a smooth, crack-free triangle mesh per
- * surface), the automatic exposure, and the PLY and GLB writers. See output.h.
+ * input polygon), the automatic exposure, and the PLY and GLB writers. See output.h.
  *
- * Per surface: a hash map from lattice coordinates to vertex ids collects the leaf corners and
- * their area-weighted mean radiosity. Leaves are then visited from the largest to the smallest:
- * for each leaf edge the midpoint is looked up recursively (a dyadic subdivision has a vertex
- * strictly inside an edge only if it has one at the edge's midpoint), which finds the T-vertices
- * in order along the edge; each gets the mean of its two neighbours along the edge, i.e. the
- * exact linear interpolation of the larger leaf's edge end values. Largest first guarantees
- * that a leaf's own corners are final (a corner can only be a T-vertex of a strictly larger
- * leaf). The leaf polygon (corners + T-vertices, convex) is then fanned. */
+ * The surfaces of one input polygon (a split quad's two triangles, a fan-split polygon's
+ * triangles: equal hr_surface.poly) form one group, reconstructed as one smooth region. A hash
+ * map from vertex keys to vertex ids collects the group's leaf corners and their area-weighted
+ * mean radiosity. A key is exact, never a rounded position: a surface corner is keyed by its
+ * corner id (corners at bitwise equal positions are one), a lattice point strictly inside an edge
+ * that two surfaces of the group share by the shared edge and the point's lattice parameter along
+ * it (measured from the edge's lower corner id; lattice points along a shared edge correspond 1:1
+ * by that parameter), any other point by its surface and lattice coordinates. Leaves of the whole
+ * group are then visited from the largest to the smallest: for each leaf edge the midpoint is
+ * looked up recursively (a dyadic subdivision has a vertex strictly inside an edge only if it has
+ * one at the edge's midpoint; along a shared edge this finds the other surface's vertices too),
+ * which finds the T-vertices in order along the edge; each gets the mean of its two neighbours
+ * along the edge, i.e. the exact linear interpolation of the larger leaf's edge end values.
+ * Largest first guarantees that a leaf's own corners are final (a corner can only be a T-vertex
+ * of a strictly larger leaf; leaf sizes are lattice lengths along the shared edges on both
+ * sides). The leaf polygon (corners + T-vertices, convex) is then fanned. Vertices are never
+ * shared between groups. */
 #include "output.h"
 #include "vec.h"
 
@@ -31,18 +40,19 @@ static int grow_bytes(void **p, int64_t *cap, int64_t need, size_t sz) {
   return 1;
 }
 
-/* ------------------------------------------------------------------ lattice hash map */
+/* ------------------------------------------------------------------ vertex hash map */
 
-#define KEY_EMPTY UINT64_MAX
+/* Open addressing with keys (kh, kl): kh is 32 bits, a 2-bit tag (never 0) and a 30-bit id, kl 64
+ * bits. A slot is 16 bytes, hi = kh << 32 | value, lo = kl; hi = 0 marks an empty slot. */
+typedef struct kslot {
+  uint64_t hi, lo;
+} kslot;
 
-typedef struct lmap {
-  uint64_t *keys;
-  int32_t *vals;
+typedef struct kmap {
+  kslot *slots;
   uint64_t mask; /* capacity - 1 (power of two) */
   int64_t alloc; /* allocated slots */
-} lmap;
-
-static inline uint64_t lat_key(uint32_t a, uint32_t b) { return ((uint64_t)a << 25) | b; }
+} kmap;
 
 static inline uint64_t hash64(uint64_t x) {
   x ^= x >> 31;
@@ -53,52 +63,126 @@ static inline uint64_t hash64(uint64_t x) {
   return x;
 }
 
+static inline uint64_t key_hash(uint32_t kh, uint64_t kl) {
+  return hash64(kl ^ ((uint64_t)kh * 0x9e3779b97f4a7c15ull));
+}
+
 /* Prepares the map for up to 'n' keys (load <= 1/2); clears only the part used. */
-static int lmap_reset(lmap *m, int64_t n) {
+static int kmap_reset(kmap *m, int64_t n) {
   int64_t cap = 16;
   while (cap < 2 * n) cap *= 2;
   if (cap > m->alloc) {
-    free(m->keys);
-    free(m->vals);
-    m->keys = malloc((size_t)cap * sizeof *m->keys);
-    m->vals = malloc((size_t)cap * sizeof *m->vals);
-    if (!m->keys || !m->vals) {
+    free(m->slots);
+    m->slots = malloc((size_t)cap * sizeof *m->slots);
+    if (!m->slots) {
       m->alloc = 0;
       return 0;
     }
     m->alloc = cap;
   }
   m->mask = (uint64_t)cap - 1;
-  memset(m->keys, 0xff, (size_t)cap * sizeof *m->keys);
+  memset(m->slots, 0, (size_t)cap * sizeof *m->slots);
   return 1;
 }
 
-static inline int32_t lmap_get(const lmap *m, uint64_t key) {
-  uint64_t i = hash64(key) & m->mask;
+static inline int32_t kmap_get(const kmap *m, uint32_t kh, uint64_t kl) {
+  uint64_t i = key_hash(kh, kl) & m->mask;
   for (;;) {
-    uint64_t k = m->keys[i];
-    if (k == key) return m->vals[i];
-    if (k == KEY_EMPTY) return -1;
+    const kslot *sl = &m->slots[i];
+    uint32_t h = (uint32_t)(sl->hi >> 32);
+    if (h == kh && sl->lo == kl) return (int32_t)(uint32_t)sl->hi;
+    if (h == 0) return -1;
     i = (i + 1) & m->mask;
   }
 }
 
-/* Returns the value of 'key', inserting 'val' when absent (*inserted = 1). */
-static inline int32_t lmap_put(lmap *m, uint64_t key, int32_t val, int *inserted) {
-  uint64_t i = hash64(key) & m->mask;
+/* Returns the value (>= 0) of the key, inserting 'val' when absent (*inserted = 1). */
+static inline int32_t kmap_put(kmap *m, uint32_t kh, uint64_t kl, int32_t val, int *inserted) {
+  uint64_t i = key_hash(kh, kl) & m->mask;
   for (;;) {
-    uint64_t k = m->keys[i];
-    if (k == key) {
+    kslot *sl = &m->slots[i];
+    uint32_t h = (uint32_t)(sl->hi >> 32);
+    if (h == kh && sl->lo == kl) {
       *inserted = 0;
-      return m->vals[i];
+      return (int32_t)(uint32_t)sl->hi;
     }
-    if (k == KEY_EMPTY) {
-      m->keys[i] = key;
-      m->vals[i] = val;
+    if (h == 0) {
+      sl->hi = ((uint64_t)kh << 32) | (uint32_t)val;
+      sl->lo = kl;
       *inserted = 1;
       return val;
     }
     i = (i + 1) & m->mask;
+  }
+}
+
+/* ------------------------------------------------------------------ polygon groups */
+
+/* A surface of the current group (the surfaces of one input polygon). Corners at the same world
+ * position (bitwise equal coordinates: the scene copies the polygon's vertices into its pieces)
+ * get one corner id; an edge between two corner ids that occurs in more than one surface is a
+ * shared edge, parametrised from its smaller to its larger corner id. */
+typedef struct gsurf {
+  int surf;          /* scene surface index */
+  int nv;            /* 3 or 4 */
+  uint8_t emit;      /* material emits */
+  int32_t corner[4]; /* corner ids */
+  int32_t edge[4];   /* edge c (corner c -> corner c+1): shared edge id, or -1 */
+  uint8_t rev[4];    /* 1 when edge c runs from the larger to the smaller corner id */
+} gsurf;
+
+/* Vertex key tags (top two bits of kh; ids below 2^30). */
+#define TAG_CORNER (1u << 30) /* kh |= corner id, kl = 0 */
+#define TAG_EDGE (2u << 30)   /* kh |= shared edge id, kl = lattice parameter along it */
+#define TAG_SURF (3u << 30)   /* kh |= group surface index, kl = (a << 25) | b */
+#define MAX_GROUP (1 << 27)   /* surfaces per group: 4 * MAX_GROUP corner and edge ids < 2^30 */
+
+/* The key of lattice point (a, b) of group surface 'ls'. A point on an edge of the surface at
+ * lattice parameter t (0..L from corner c to corner c+1; both parametrisations of a surface are
+ * linear along every edge) is the same world point in every surface holding that edge. */
+static inline void vkey(const gsurf *gs, int ls, uint32_t a, uint32_t b, uint32_t *kh,
+                        uint64_t *kl) {
+  const uint32_t L = HR_LATTICE;
+  const gsurf *g = &gs[ls];
+  int corner = -1, e = -1;
+  uint32_t t = 0;
+  if (b == 0) {
+    if (a == 0)
+      corner = 0;
+    else if (a == L)
+      corner = 1;
+    else
+      e = 0, t = a;
+  } else if (g->nv == 3) {
+    if (a == 0) {
+      if (b == L)
+        corner = 2;
+      else
+        e = 2, t = L - b;
+    } else if ((uint64_t)a + b == L) {
+      e = 1, t = b;
+    }
+  } else if (b == L) {
+    if (a == 0)
+      corner = 3;
+    else if (a == L)
+      corner = 2;
+    else
+      e = 2, t = L - a;
+  } else if (a == 0) {
+    e = 3, t = L - b;
+  } else if (a == L) {
+    e = 1, t = b;
+  }
+  if (corner >= 0) {
+    *kh = TAG_CORNER | (uint32_t)g->corner[corner];
+    *kl = 0;
+  } else if (e >= 0 && g->edge[e] >= 0) {
+    *kh = TAG_EDGE | (uint32_t)g->edge[e];
+    *kl = g->rev[e] ? L - t : t;
+  } else {
+    *kh = TAG_SURF | (uint32_t)ls;
+    *kl = ((uint64_t)a << 25) | b;
   }
 }
 
@@ -107,28 +191,46 @@ static inline int32_t lmap_put(lmap *m, uint64_t key, int32_t val, int *inserted
 typedef struct build {
   hr_mesh *m;
   int64_t cap_v, cap_t;
-  /* per-surface scratch, indexed by local vertex id */
-  double *val;   /* 3 per vertex: B */
-  double *wsum;  /* area weight sum */
-  uint32_t *lat; /* 2 per vertex: lattice coordinates of corners */
-  double *par;   /* 2 per vertex: lattice coordinates as doubles (centres are not integral) */
+  /* per-group scratch, indexed by local vertex id */
+  double *val;  /* 3 per vertex: B */
+  double *wsum; /* area weight sum */
+  int32_t *vsf; /* scene surface whose parametrisation places the vertex */
+  double *par;  /* 2 per vertex: lattice coordinates on that surface (centres not integral) */
   int64_t cap_l;
   int64_t nloc;
   /* ring of the current leaf polygon (local ids) */
   int32_t *ring;
   int64_t cap_ring, nring;
-  lmap map;
+  int32_t *lcid; /* 4 per leaf of the group (in idx order): local ids of its corners */
+  int64_t cap_lcid;
+  kmap map; /* vertex keys -> local ids */
+  /* the current group's surfaces, corner positions and shared edges */
+  gsurf *gs;
+  int64_t cap_gs;
+  hr_vec3 *cpos;   /* corner positions */
+  int32_t *ctab;   /* open-addressing table of corner ids */
+  int32_t *ecount; /* surfaces holding each edge */
+  int64_t cap_c, cap_ctab;
+  kmap emap; /* (smaller corner id, larger corner id) -> edge id */
 } build;
 
 static double lum(const double *b) { return 0.2126 * b[0] + 0.7152 * b[1] + 0.0722 * b[2]; }
 
+/* Point of surface 'f' at parameters (a, b) in [0,1] (exactly a vertex at a corner). */
 static hr_vec3 surf_point(const hr_surface *f, double a, double b) {
   if (f->nverts == 4) {
+    if (a == 0 && b == 0) return f->v[0];
+    if (a == 1 && b == 0) return f->v[1];
+    if (a == 1 && b == 1) return f->v[2];
+    if (a == 0 && b == 1) return f->v[3];
     hr_vec3 p = v3_scale(f->v[0], (1 - a) * (1 - b));
     p = v3_add(p, v3_scale(f->v[1], a * (1 - b)));
     p = v3_add(p, v3_scale(f->v[2], a * b));
     return v3_add(p, v3_scale(f->v[3], (1 - a) * b));
   }
+  if (a == 0 && b == 0) return f->v[0];
+  if (a == 1 && b == 0) return f->v[1];
+  if (a == 0 && b == 1) return f->v[2];
   hr_vec3 p = v3_add(f->v[0], v3_scale(v3_sub(f->v[1], f->v[0]), a));
   return v3_add(p, v3_scale(v3_sub(f->v[2], f->v[0]), b));
 }
@@ -143,9 +245,9 @@ static int local_grow(build *bd, int64_t need) {
   double *w = realloc(bd->wsum, (size_t)nc * sizeof *w);
   if (!w) return 0;
   bd->wsum = w;
-  uint32_t *l = realloc(bd->lat, (size_t)nc * 2 * sizeof *l);
-  if (!l) return 0;
-  bd->lat = l;
+  int32_t *sf = realloc(bd->vsf, (size_t)nc * sizeof *sf);
+  if (!sf) return 0;
+  bd->vsf = sf;
   double *pp = realloc(bd->par, (size_t)nc * 2 * sizeof *pp);
   if (!pp) return 0;
   bd->par = pp;
@@ -159,21 +261,26 @@ static int ring_push(build *bd, int32_t id) {
   return 1;
 }
 
-/* Appends the T-vertices strictly inside lattice segment P-Q (local ids pid, qid) to the ring in
- * order from P to Q, setting their values to the midpoint means. Returns 0 on NOMEM. */
-static int probe(build *bd, int32_t pid, int32_t qid, int *found) {
-  const uint32_t *P = &bd->lat[2 * pid], *Q = &bd->lat[2 * qid];
+/* Appends the T-vertices strictly inside segment P-Q (lattice coordinates on group surface 'ls',
+ * local ids pid, qid) to the ring in order from P to Q, setting their values to the midpoint
+ * means. Along a shared edge the keys find the other surface's vertices too. 0 on NOMEM. */
+static int probe(build *bd, int ls, const uint32_t P[2], const uint32_t Q[2], int32_t pid,
+                 int32_t qid, int *found) {
   uint32_t sa = P[0] + Q[0], sb = P[1] + Q[1];
   if ((sa | sb) & 1u) return 1;
   if (P[0] == Q[0] && P[1] == Q[1]) return 1;
-  int32_t mid = lmap_get(&bd->map, lat_key(sa / 2, sb / 2));
+  const uint32_t M[2] = {sa / 2, sb / 2};
+  uint32_t kh;
+  uint64_t kl;
+  vkey(bd->gs, ls, M[0], M[1], &kh, &kl);
+  int32_t mid = kmap_get(&bd->map, kh, kl);
   if (mid < 0) return 1;
   *found = 1;
   for (int c = 0; c < 3; c++)
     bd->val[3 * mid + c] = 0.5 * (bd->val[3 * pid + c] + bd->val[3 * qid + c]);
-  if (!probe(bd, pid, mid, found)) return 0;
+  if (!probe(bd, ls, P, M, pid, mid, found)) return 0;
   if (!ring_push(bd, mid)) return 0;
-  return probe(bd, mid, qid, found);
+  return probe(bd, ls, M, Q, mid, qid, found);
 }
 
 static int tris_grow(build *bd, int64_t need) {
@@ -226,7 +333,9 @@ static int verts_grow(build *bd, int64_t need) {
   return 1;
 }
 
-/* Lattice edge length of a leaf (max-norm over its edges). */
+/* Lattice edge length of a leaf (max-norm over its edges). For the dyadic subdivisions of
+ * hrad.h this is also the lattice-parameter length of each of its edges lying on a surface
+ * edge, so sizes compare across the surfaces of a group. */
 static uint32_t leaf_size(const hr_leaf *l) {
   uint32_t s = 0;
   for (int i = 0; i < l->nverts; i++) {
@@ -247,29 +356,122 @@ static int log2u(uint32_t s) {
   return k;
 }
 
-/* Processes one surface's leaves (indices idx[0..k)); 'order' is scratch of k entries. */
-static hr_status build_surface(build *bd, const hr_scene *s, int surf, const hr_leaf *leaves,
-                               const int64_t *idx, int64_t k, int64_t *order) {
+static uint64_t pos_hash(hr_vec3 p) {
+  /* + 0.0 turns -0 into +0, which compares equal */
+  double c[3] = {p.x + 0.0, p.y + 0.0, p.z + 0.0};
+  uint64_t h = 0x9e3779b97f4a7c15ull;
+  for (int i = 0; i < 3; i++) {
+    uint64_t u;
+    memcpy(&u, &c[i], sizeof u);
+    h = hash64(h ^ u);
+  }
+  return h;
+}
+
+/* Fills bd->gs for the 'ng' scene surfaces 'surfs' of one group: corner ids and shared edges.
+ * O(ng) expected. */
+static hr_status group_setup(build *bd, const hr_scene *s, const int *surfs, int ng) {
+  int64_t nc4 = 4 * (int64_t)ng;
+  if (!grow_bytes((void **)&bd->gs, &bd->cap_gs, ng, sizeof *bd->gs)) return HR_ERR_NOMEM;
+  if (nc4 > bd->cap_c) {
+    int64_t cap = bd->cap_c;
+    hr_vec3 *cp = bd->cpos;
+    if (!grow_bytes((void **)&cp, &cap, nc4, sizeof *cp)) return HR_ERR_NOMEM;
+    bd->cpos = cp;
+    int32_t *ec = realloc(bd->ecount, (size_t)cap * sizeof *ec);
+    if (!ec) return HR_ERR_NOMEM;
+    bd->ecount = ec;
+    bd->cap_c = cap;
+  }
+  int64_t tcap = 16;
+  while (tcap < 2 * nc4) tcap *= 2;
+  if (!grow_bytes((void **)&bd->ctab, &bd->cap_ctab, tcap, sizeof *bd->ctab))
+    return HR_ERR_NOMEM;
+  memset(bd->ctab, 0xff, (size_t)tcap * sizeof *bd->ctab);
+  uint64_t tmask = (uint64_t)tcap - 1;
+  int32_t ncorner = 0;
+  for (int ls = 0; ls < ng; ls++) {
+    const hr_surface *f = &s->surfs[surfs[ls]];
+    const double *em = s->mats[f->material].emit;
+    gsurf *g = &bd->gs[ls];
+    g->surf = surfs[ls];
+    g->nv = f->nverts;
+    g->emit = (em[0] > 0 || em[1] > 0 || em[2] > 0) ? 1 : 0;
+    for (int c = 0; c < g->nv; c++) {
+      hr_vec3 p = f->v[c];
+      uint64_t h = pos_hash(p) & tmask;
+      for (;;) {
+        int32_t id = bd->ctab[h];
+        if (id < 0) {
+          bd->ctab[h] = ncorner;
+          bd->cpos[ncorner] = p;
+          g->corner[c] = ncorner++;
+          break;
+        }
+        hr_vec3 q = bd->cpos[id];
+        if (q.x == p.x && q.y == p.y && q.z == p.z) {
+          g->corner[c] = id;
+          break;
+        }
+        h = (h + 1) & tmask;
+      }
+    }
+  }
+  if (!kmap_reset(&bd->emap, nc4)) return HR_ERR_NOMEM;
+  int32_t nedge = 0;
+  for (int ls = 0; ls < ng; ls++) {
+    gsurf *g = &bd->gs[ls];
+    for (int c = 0; c < g->nv; c++) {
+      int32_t a = g->corner[c], b = g->corner[(c + 1) % g->nv];
+      g->rev[c] = a > b;
+      g->edge[c] = -1;
+      if (a == b) continue;
+      uint64_t lo = (uint64_t)(a < b ? a : b), hi = (uint64_t)(a < b ? b : a);
+      int ins;
+      int32_t id = kmap_put(&bd->emap, TAG_EDGE, (lo << 32) | hi, nedge, &ins);
+      if (ins) bd->ecount[nedge++] = 0;
+      bd->ecount[id]++;
+      g->edge[c] = id;
+    }
+  }
+  for (int ls = 0; ls < ng; ls++) {
+    gsurf *g = &bd->gs[ls];
+    for (int c = 0; c < g->nv; c++)
+      if (g->edge[c] >= 0 && bd->ecount[g->edge[c]] < 2) g->edge[c] = -1;
+  }
+  return HR_OK;
+}
+
+/* Processes the leaves (indices idx[0..k)) of one group: the 'ng' scene surfaces 'surfs' of one
+ * input polygon. 'slocal' maps scene surface -> group surface index; 'order' is scratch of k. */
+static hr_status build_group(build *bd, const hr_scene *s, const int *surfs, int ng,
+                             int32_t *slocal, const hr_leaf *leaves, const int64_t *idx, int64_t k,
+                             int64_t *order) {
   hr_mesh *m = bd->m;
-  const hr_surface *f = &s->surfs[surf];
-  const double *em = s->mats[f->material].emit;
-  uint8_t emit = (em[0] > 0 || em[1] > 0 || em[2] > 0) ? 1 : 0;
-  int nv = f->nverts;
-  if (k * (nv + 1) >= INT32_MAX) return HR_ERR_TOO_BIG;
-  if (!lmap_reset(&bd->map, k * nv)) return HR_ERR_NOMEM;
-  if (!local_grow(bd, k * nv + k)) return HR_ERR_NOMEM;
+  if (ng > MAX_GROUP) return HR_ERR_TOO_BIG;
+  hr_status st = group_setup(bd, s, surfs, ng);
+  if (st != HR_OK) return st;
+  for (int ls = 0; ls < ng; ls++) slocal[surfs[ls]] = ls;
+  if (k * 5 >= INT32_MAX) return HR_ERR_TOO_BIG;
+  if (!kmap_reset(&bd->map, k * 4)) return HR_ERR_NOMEM;
+  if (!local_grow(bd, k * 5)) return HR_ERR_NOMEM;
+  if (!grow_bytes((void **)&bd->lcid, &bd->cap_lcid, 4 * k, sizeof *bd->lcid)) return HR_ERR_NOMEM;
   bd->nloc = 0;
   /* 1. corners and their area-weighted sums */
   for (int64_t i = 0; i < k; i++) {
     const hr_leaf *l = &leaves[idx[i]];
+    int ls = slocal[l->surf];
     /* a tiny weight keeps zero-area leaves meaningful without disturbing real weights */
     double w = (l->area > 0 && isfinite(l->area)) ? l->area : 1e-300;
-    for (int c = 0; c < nv; c++) {
+    for (int c = 0; c < l->nverts; c++) {
       int ins;
-      int32_t id = lmap_put(&bd->map, lat_key(l->lat[c][0], l->lat[c][1]), (int32_t)bd->nloc, &ins);
+      uint32_t kh;
+      uint64_t kl;
+      vkey(bd->gs, ls, l->lat[c][0], l->lat[c][1], &kh, &kl);
+      int32_t id = kmap_put(&bd->map, kh, kl, (int32_t)bd->nloc, &ins);
+      bd->lcid[4 * i + c] = id;
       if (ins) {
-        bd->lat[2 * id] = l->lat[c][0];
-        bd->lat[2 * id + 1] = l->lat[c][1];
+        bd->vsf[id] = l->surf;
         bd->par[2 * id] = l->lat[c][0];
         bd->par[2 * id + 1] = l->lat[c][1];
         bd->val[3 * id] = bd->val[3 * id + 1] = bd->val[3 * id + 2] = 0;
@@ -291,14 +493,15 @@ static hr_status build_surface(build *bd, const hr_scene *s, int surf, const hr_
     start[b] = acc;
     acc += c;
   }
-  for (int64_t i = 0; i < k; i++) order[start[32 - log2u(leaf_size(&leaves[idx[i]]))]++] = idx[i];
+  for (int64_t i = 0; i < k; i++) order[start[32 - log2u(leaf_size(&leaves[idx[i]]))]++] = i;
   /* 3. T-vertices and triangulation */
   int64_t vbase = m->nverts;
-  for (int64_t i = 0; i < k; i++) {
-    int64_t li = order[i];
+  for (int64_t oi = 0; oi < k; oi++) {
+    int64_t i = order[oi], li = idx[i];
     const hr_leaf *l = &leaves[li];
-    int32_t cid[4];
-    for (int c = 0; c < nv; c++) cid[c] = lmap_get(&bd->map, lat_key(l->lat[c][0], l->lat[c][1]));
+    int ls = slocal[l->surf];
+    int nv = l->nverts;
+    uint8_t emit = bd->gs[ls].emit;
     /* keep counter-clockwise in lattice space */
     double sa = 0;
     for (int c = 0; c < nv; c++) {
@@ -306,20 +509,23 @@ static hr_status build_surface(build *bd, const hr_scene *s, int surf, const hr_
       sa += (double)l->lat[c][0] * l->lat[d][1] - (double)l->lat[d][0] * l->lat[c][1];
     }
     if (sa == 0) continue; /* degenerate leaf: nothing to draw */
-    if (sa < 0)
-      for (int c = 0; c < nv / 2; c++) {
-        int32_t t = cid[c];
-        cid[c] = cid[nv - 1 - c];
-        cid[nv - 1 - c] = t;
-      }
+    uint32_t cl[4][2];
+    int32_t cid[4];
+    for (int c = 0; c < nv; c++) {
+      int from = sa < 0 ? nv - 1 - c : c;
+      cl[c][0] = l->lat[from][0];
+      cl[c][1] = l->lat[from][1];
+      cid[c] = bd->lcid[4 * i + from];
+    }
     int64_t rpos[4];
     int edge_t[4];
     bd->nring = 0;
     for (int c = 0; c < nv; c++) {
+      int d = (c + 1) % nv;
       rpos[c] = bd->nring;
       if (!ring_push(bd, cid[c])) return HR_ERR_NOMEM;
       edge_t[c] = 0;
-      if (!probe(bd, cid[c], cid[(c + 1) % nv], &edge_t[c])) return HR_ERR_NOMEM;
+      if (!probe(bd, ls, cl[c], cl[d], cid[c], cid[d], &edge_t[c])) return HR_ERR_NOMEM;
     }
     int64_t r = bd->nring;
     /* a corner whose two edges hold no T-vertex can be the fan's apex; for quads take the one
@@ -339,33 +545,33 @@ static hr_status build_surface(build *bd, const hr_scene *s, int surf, const hr_
       int64_t p0 = rpos[best];
       for (int64_t j = 1; j + 1 < r; j++)
         if (!emit_tri(bd, vbase, bd->ring[p0], bd->ring[(p0 + j) % r], bd->ring[(p0 + j + 1) % r],
-                      surf, li, emit))
+                      l->surf, li, emit))
           return HR_ERR_NOMEM;
     } else {
       /* centre vertex: mean of the corners' parameters and values (exact for linear fields) */
       int32_t cv = (int32_t)bd->nloc++;
       double ca = 0, cb = 0, cval[3] = {0, 0, 0};
       for (int c = 0; c < nv; c++) {
-        ca += bd->par[2 * cid[c]];
-        cb += bd->par[2 * cid[c] + 1];
+        ca += cl[c][0];
+        cb += cl[c][1];
         for (int ch = 0; ch < 3; ch++) cval[ch] += bd->val[3 * cid[c] + ch];
       }
+      bd->vsf[cv] = l->surf;
       bd->par[2 * cv] = ca / nv;
       bd->par[2 * cv + 1] = cb / nv;
-      bd->lat[2 * cv] = bd->lat[2 * cv + 1] = UINT32_MAX; /* not in the lattice map */
       for (int ch = 0; ch < 3; ch++) bd->val[3 * cv + ch] = cval[ch] / nv;
       m->ncentre++;
       for (int64_t j = 0; j < r; j++)
-        if (!emit_tri(bd, vbase, cv, bd->ring[j], bd->ring[(j + 1) % r], surf, li, emit))
+        if (!emit_tri(bd, vbase, cv, bd->ring[j], bd->ring[(j + 1) % r], l->surf, li, emit))
           return HR_ERR_NOMEM;
     }
   }
-  /* 4. vertices of this surface */
+  /* 4. vertices of this group */
   if (vbase + bd->nloc > (int64_t)UINT32_MAX) return HR_ERR_TOO_BIG;
   if (!verts_grow(bd, vbase + bd->nloc)) return HR_ERR_NOMEM;
   const double inv = 1.0 / (double)HR_LATTICE;
   for (int64_t v = 0; v < bd->nloc; v++) {
-    hr_vec3 p = surf_point(f, bd->par[2 * v] * inv, bd->par[2 * v + 1] * inv);
+    hr_vec3 p = surf_point(&s->surfs[bd->vsf[v]], bd->par[2 * v] * inv, bd->par[2 * v + 1] * inv);
     float *P = &m->pos[3 * (vbase + v)], *B = &m->B[3 * (vbase + v)];
     P[0] = (float)p.x;
     P[1] = (float)p.y;
@@ -399,29 +605,44 @@ hr_status hr_mesh_build(const hr_scene *s, const hr_leaf *leaves, int64_t n, hr_
     for (int c = 0; c < l->nverts; c++)
       if (l->lat[c][0] > HR_LATTICE || l->lat[c][1] > HR_LATTICE) return HR_ERR_INVALID;
   }
+  int ns = s->nsurfs, np = s->npolys > 0 ? s->npolys : 0;
   hr_mesh *m = calloc(1, sizeof *m);
-  int64_t *cnt = calloc((size_t)s->nsurfs + 1, sizeof *cnt);
+  int64_t *cnt = calloc((size_t)ns + 1, sizeof *cnt);
   int64_t *idx = malloc((size_t)(n > 0 ? n : 1) * sizeof *idx);
   int64_t *order = malloc((size_t)(n > 0 ? n : 1) * sizeof *order);
+  int *pc = calloc((size_t)np + 2, sizeof *pc);
+  int *sorder = malloc((size_t)(ns > 0 ? ns : 1) * sizeof *sorder);
+  int *rank = malloc((size_t)(ns > 0 ? ns : 1) * sizeof *rank);
+  int32_t *slocal = malloc((size_t)(ns > 0 ? ns : 1) * sizeof *slocal);
   build bd;
   memset(&bd, 0, sizeof bd);
   bd.m = m;
   hr_status st = HR_OK;
-  if (!m || !cnt || !idx || !order) {
+  if (!m || !cnt || !idx || !order || !pc || !sorder || !rank || !slocal) {
     st = HR_ERR_NOMEM;
     goto done;
   }
-  /* counting sort by surface, stable */
-  for (int64_t i = 0; i < n; i++) cnt[leaves[i].surf + 1]++;
-  for (int f = 0; f < s->nsurfs; f++) cnt[f + 1] += cnt[f];
-  for (int64_t i = 0; i < n; i++) idx[cnt[leaves[i].surf]++] = i;
-  /* cnt[f] is now the end of surface f */
-  int64_t b = 0;
-  for (int f = 0; f < s->nsurfs && st == HR_OK; f++) {
-    int64_t e = cnt[f];
-    if (e > b) st = build_surface(&bd, s, f, leaves, idx + b, e - b, order);
-    b = e;
+  /* surfaces grouped by input polygon, stable counting sort (surfaces with an out-of-range
+   * poly index go last, each a group of its own) */
+#define POLY_OF(f) (s->surfs[f].poly >= 0 && s->surfs[f].poly < np ? s->surfs[f].poly : np)
+  for (int f = 0; f < ns; f++) pc[POLY_OF(f) + 1]++;
+  for (int p = 0; p <= np; p++) pc[p + 1] += pc[p];
+  for (int f = 0; f < ns; f++) sorder[pc[POLY_OF(f)]++] = f;
+  for (int r = 0; r < ns; r++) rank[sorder[r]] = r;
+  /* leaves by surface rank, stable */
+  for (int64_t i = 0; i < n; i++) cnt[rank[leaves[i].surf] + 1]++;
+  for (int r = 0; r < ns; r++) cnt[r + 1] += cnt[r];
+  for (int64_t i = 0; i < n; i++) idx[cnt[rank[leaves[i].surf]]++] = i;
+  /* cnt[r] is now the end of the leaves of rank r */
+  for (int r0 = 0; r0 < ns && st == HR_OK;) {
+    int p = POLY_OF(sorder[r0]), r1 = r0 + 1;
+    if (p < np)
+      while (r1 < ns && POLY_OF(sorder[r1]) == p) r1++;
+    int64_t b = r0 > 0 ? cnt[r0 - 1] : 0, e = cnt[r1 - 1];
+    if (e > b) st = build_group(&bd, s, sorder + r0, r1 - r0, slocal, leaves, idx + b, e - b, order);
+    r0 = r1;
   }
+#undef POLY_OF
   if (st == HR_OK) {
     /* trim */
     if (m->nverts > 0) {
@@ -435,13 +656,22 @@ done:
   free(cnt);
   free(idx);
   free(order);
+  free(pc);
+  free(sorder);
+  free(rank);
+  free(slocal);
   free(bd.val);
   free(bd.wsum);
-  free(bd.lat);
+  free(bd.vsf);
   free(bd.par);
   free(bd.ring);
-  free(bd.map.keys);
-  free(bd.map.vals);
+  free(bd.lcid);
+  free(bd.gs);
+  free(bd.cpos);
+  free(bd.ctab);
+  free(bd.ecount);
+  free(bd.map.slots);
+  free(bd.emap.slots);
   if (st != HR_OK) {
     hr_mesh_destroy(&m);
     return st;

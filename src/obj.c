@@ -33,7 +33,14 @@
  *    such a face exists (or the library's own "default" if one defines it).
  * Polygons: hr_scene_add_polygon splits them; degenerate ones are skipped with the warning
  * "PATH:LINE: degenerate polygon skipped", non-planar ones with more than 4 vertices are an
- * error. A file without any surviving polygon is an error ("PATH: no polygons"). Emitters are
+ * error. A face whose set of vertex positions (sorted, repeated positions counted once, compared
+ * exactly) equals that of an earlier polygon facing the same way (positive dot product of their
+ * Newell normals) is a duplicate: it is skipped with the warning "PATH:LINE: duplicate of the
+ * polygon on line N; skipped" (the Cornell box data repeats a side face of each box as its
+ * "bottom"; two coincident surfaces would count that area twice). The material does not matter.
+ * A face with the same positions but the opposite facing is kept: back to back, the two make a
+ * two-sided panel, which one-sided surfaces can only model that way. Found through a hash table
+ * of the sorted positions: O(total face vertices). A file without any surviving polygon is an error ("PATH: no polygons"). Emitters are
  * not required here (the solver checks). Numbers are read with strtod, so the caller must not
  * have switched LC_NUMERIC to a locale with a decimal comma.
  */
@@ -41,6 +48,7 @@
 
 #include <errno.h>
 #include <limits.h>
+#include <stdint.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -64,7 +72,23 @@ typedef struct obj_ctx {
   char *warned; /* unknown keywords already reported, each NUL-terminated */
   size_t warned_len, warned_cap;
   int nwarned;
+  /* polygons added so far, for finding duplicates (see the file comment) */
+  struct face_rec *recs;
+  size_t nrecs, cap_recs;
+  hr_vec3 *rpos; /* each record's sorted, de-duplicated positions, concatenated */
+  size_t nrpos, cap_rpos;
+  size_t *rtab; /* open-addressing table of record indices (SIZE_MAX = empty) */
+  size_t cap_rtab;
+  hr_vec3 *sorted; /* scratch: the current face's sorted positions */
+  size_t cap_sorted;
 } obj_ctx;
+
+typedef struct face_rec {
+  uint64_t hash; /* of the sorted positions */
+  size_t off, n; /* positions rpos[off .. off+n) */
+  hr_vec3 nrm;   /* Newell normal (not normalised) */
+  long line;
+} face_rec;
 
 /* Iterator over the logical lines of a mutable NUL-terminated buffer. */
 typedef struct line_iter {
@@ -455,6 +479,118 @@ static int parse_ref(char *p, size_t n, long long *vi) {
   return parse_int(&p, &dummy) && p == end;
 }
 
+/* ---------------------------------------------------------------- duplicate polygons */
+
+static int cmp_pos(const void *pa, const void *pb) {
+  const hr_vec3 *a = pa, *b = pb;
+  if (a->x != b->x) return a->x < b->x ? -1 : 1;
+  if (a->y != b->y) return a->y < b->y ? -1 : 1;
+  if (a->z != b->z) return a->z < b->z ? -1 : 1;
+  return 0;
+}
+
+static uint64_t mix64(uint64_t x) {
+  x ^= x >> 31;
+  x *= 0x7fb5d329728ea185ull;
+  x ^= x >> 27;
+  x *= 0x81dadef4bc2dd44dull;
+  x ^= x >> 33;
+  return x;
+}
+
+static hr_vec3 newell(const hr_vec3 *v, size_t n) {
+  hr_vec3 r = {0, 0, 0};
+  for (size_t i = 0; i < n; i++) {
+    hr_vec3 a = v[i], b = v[(i + 1) % n];
+    r.x += (a.y - b.y) * (a.z + b.z);
+    r.y += (a.z - b.z) * (a.x + b.x);
+    r.z += (a.x - b.x) * (a.y + b.y);
+  }
+  return r;
+}
+
+/* Sorts and de-duplicates the current face's 'n' positions into c->sorted ('*m' of them) and
+ * hashes them; 0 when out of memory. */
+static int face_key(obj_ctx *c, size_t n, size_t *m, uint64_t *hash) {
+  if (!grow((void **)&c->sorted, &c->cap_sorted, n, sizeof *c->sorted)) return 0;
+  memcpy(c->sorted, c->face, n * sizeof *c->sorted);
+  if (n <= 16) { /* typical faces: insertion sort, no qsort call overhead */
+    for (size_t i = 1; i < n; i++) {
+      hr_vec3 t = c->sorted[i];
+      size_t j = i;
+      for (; j > 0 && cmp_pos(&c->sorted[j - 1], &t) > 0; j--) c->sorted[j] = c->sorted[j - 1];
+      c->sorted[j] = t;
+    }
+  } else {
+    qsort(c->sorted, n, sizeof *c->sorted, cmp_pos);
+  }
+  size_t k = 0;
+  for (size_t i = 0; i < n; i++)
+    if (k == 0 || cmp_pos(&c->sorted[k - 1], &c->sorted[i]) != 0) c->sorted[k++] = c->sorted[i];
+  uint64_t h = 0x9e3779b97f4a7c15ull ^ k;
+  for (size_t i = 0; i < k; i++) {
+    /* + 0.0 turns -0 into +0, which compares equal */
+    double xyz[3] = {c->sorted[i].x + 0.0, c->sorted[i].y + 0.0, c->sorted[i].z + 0.0};
+    for (int j = 0; j < 3; j++) {
+      uint64_t u;
+      memcpy(&u, &xyz[j], sizeof u);
+      h = mix64(h ^ u);
+    }
+  }
+  *m = k;
+  *hash = h;
+  return 1;
+}
+
+/* The line of an earlier polygon with the same positions (c->sorted[0..m)) facing along 'nrm',
+ * or 0. */
+static long find_duplicate(const obj_ctx *c, size_t m, uint64_t hash, hr_vec3 nrm) {
+  if (c->cap_rtab == 0) return 0;
+  size_t mask = c->cap_rtab - 1;
+  for (size_t i = (size_t)hash & mask; c->rtab[i] != SIZE_MAX; i = (i + 1) & mask) {
+    const face_rec *r = &c->recs[c->rtab[i]];
+    if (r->hash != hash || r->n != m) continue;
+    if (r->nrm.x * nrm.x + r->nrm.y * nrm.y + r->nrm.z * nrm.z <= 0) continue;
+    size_t j = 0;
+    while (j < m && cmp_pos(&c->rpos[r->off + j], &c->sorted[j]) == 0) j++;
+    if (j == m) return r->line;
+  }
+  return 0;
+}
+
+/* Records the polygon just added (c->sorted[0..m), 'hash', 'nrm', 'line'); 0 on NOMEM. */
+static int record_face(obj_ctx *c, size_t m, uint64_t hash, hr_vec3 nrm, long line) {
+  if (!grow((void **)&c->recs, &c->cap_recs, c->nrecs + 1, sizeof *c->recs) ||
+      !grow((void **)&c->rpos, &c->cap_rpos, c->nrpos + m, sizeof *c->rpos))
+    return 0;
+  if (2 * (c->nrecs + 1) > c->cap_rtab) { /* keep the load <= 1/2: rebuild twice as large */
+    size_t nc = c->cap_rtab ? 2 * c->cap_rtab : 64;
+    size_t *t = malloc(nc * sizeof *t);
+    if (!t) return 0;
+    memset(t, 0xff, nc * sizeof *t);
+    for (size_t r = 0; r < c->nrecs; r++) {
+      size_t i = (size_t)c->recs[r].hash & (nc - 1);
+      while (t[i] != SIZE_MAX) i = (i + 1) & (nc - 1);
+      t[i] = r;
+    }
+    free(c->rtab);
+    c->rtab = t;
+    c->cap_rtab = nc;
+  }
+  face_rec *r = &c->recs[c->nrecs];
+  r->hash = hash;
+  r->off = c->nrpos;
+  r->n = m;
+  r->nrm = nrm;
+  r->line = line;
+  memcpy(&c->rpos[c->nrpos], c->sorted, m * sizeof *c->rpos);
+  c->nrpos += m;
+  size_t i = (size_t)hash & (c->cap_rtab - 1);
+  while (c->rtab[i] != SIZE_MAX) i = (i + 1) & (c->cap_rtab - 1);
+  c->rtab[i] = c->nrecs++;
+  return 1;
+}
+
 /* Handles `f ref ref ref ...` with the references at 'p'. */
 static hr_status do_face(obj_ctx *c, long line, char *p) {
   size_t n = 0;
@@ -490,6 +626,17 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
     if (c->cur_mat < 0)
       return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
   }
+  size_t m;
+  uint64_t hash;
+  if (!face_key(c, n, &m, &hash))
+    return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
+  hr_vec3 nrm = newell(c->face, n);
+  long dup = find_duplicate(c, m, hash, nrm);
+  if (dup > 0) {
+    hr_log_warn(c->log, "%s:%ld: duplicate of the polygon on line %ld; skipped", c->path, line,
+                dup);
+    return HR_OK;
+  }
   hr_poly_result res;
   hr_status st = hr_scene_add_polygon(c->s, c->face, (int)n, c->cur_mat, &res);
   if (st == HR_ERR_NOMEM) return hr_err_set(c->err, st, "%s:%ld: out of memory", c->path, line);
@@ -499,6 +646,8 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
   else if (res == HR_POLY_NONPLANAR)
     return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: non-planar polygon with %zu vertices", c->path,
                       line, n);
+  else if (!record_face(c, m, hash, nrm, line))
+    return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
   return HR_OK;
 }
 
@@ -599,6 +748,10 @@ static hr_status parse_owned(char *buf, size_t len, const char *path, const hr_l
   free(c.verts);
   free(c.face);
   free(c.warned);
+  free(c.recs);
+  free(c.rpos);
+  free(c.rtab);
+  free(c.sorted);
   if (st != HR_OK) {
     hr_scene_destroy(&c.s);
     return st;

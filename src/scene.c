@@ -236,17 +236,212 @@ void hr_scene_bounds(const hr_scene *s, hr_vec3 *lo, hr_vec3 *hi) {
   *hi = b;
 }
 
+/* ---------------------------------------------------------------- automatic camera */
+
+/* A tiny z-buffer that tells, per pixel, whether the nearest surface shows its front or its back:
+ * enough to score candidate views with occlusion. */
+#define ACAM_W 64
+#define ACAM_H 48
+
+typedef struct acam_buf {
+  float invz[ACAM_W * ACAM_H]; /* 1/depth of the nearest surface, 0 = none */
+  signed char side[ACAM_W * ACAM_H]; /* +1 front, -1 back, 0 none */
+} acam_buf;
+
+typedef struct acam_view {
+  hr_vec3 eye, r, u, f; /* position and orthonormal basis (right, up, forward) */
+  double focal;         /* pixels per unit of x/z */
+  double znear;
+} acam_view;
+
+static int acam_setup(const hr_camera *c, double znear, acam_view *v) {
+  v->eye = c->eye;
+  v->f = v3_norm(v3_sub(c->at, c->eye));
+  v->r = v3_cross(v->f, c->up);
+  if (!(v3_len(v->r) > 1e-9)) return 0;
+  v->r = v3_norm(v->r);
+  v->u = v3_cross(v->r, v->f);
+  v->focal = 0.5 * ACAM_H / tan(0.5 * c->fov_deg * M_PI / 180.0);
+  v->znear = znear;
+  return 1;
+}
+
+/* Rasterises a convex polygon given in camera space (x right, y up, z forward; all z >= znear). */
+static void acam_raster(acam_buf *b, const acam_view *v, const hr_vec3 *q, int n, int side) {
+  double sx[8], sy[8], iz[8];
+  for (int i = 0; i < n; i++) {
+    iz[i] = 1.0 / q[i].z;
+    sx[i] = 0.5 * ACAM_W + q[i].x * iz[i] * v->focal;
+    sy[i] = 0.5 * ACAM_H - q[i].y * iz[i] * v->focal;
+  }
+  for (int t = 1; t + 1 < n; t++) {
+    int k[3] = {0, t, t + 1};
+    double area = (sx[k[1]] - sx[k[0]]) * (sy[k[2]] - sy[k[0]]) -
+                  (sx[k[2]] - sx[k[0]]) * (sy[k[1]] - sy[k[0]]);
+    if (!(fabs(area) > 1e-12)) continue;
+    double x0 = fmin(sx[k[0]], fmin(sx[k[1]], sx[k[2]])), x1 = fmax(sx[k[0]], fmax(sx[k[1]], sx[k[2]]));
+    double y0 = fmin(sy[k[0]], fmin(sy[k[1]], sy[k[2]])), y1 = fmax(sy[k[0]], fmax(sy[k[1]], sy[k[2]]));
+    int px0 = (int)fmax(0, floor(x0)), px1 = (int)fmin(ACAM_W - 1, ceil(x1));
+    int py0 = (int)fmax(0, floor(y0)), py1 = (int)fmin(ACAM_H - 1, ceil(y1));
+    for (int py = py0; py <= py1; py++)
+      for (int px = px0; px <= px1; px++) {
+        double cx = px + 0.5, cy = py + 0.5, w[3];
+        for (int e = 0; e < 3; e++) {
+          int i = k[(e + 1) % 3], j = k[(e + 2) % 3];
+          w[e] = ((sx[j] - sx[i]) * (cy - sy[i]) - (sy[j] - sy[i]) * (cx - sx[i])) / area;
+        }
+        if (w[0] < 0 || w[1] < 0 || w[2] < 0) continue;
+        float z = (float)(w[0] * iz[k[0]] + w[1] * iz[k[1]] + w[2] * iz[k[2]]);
+        int pi = py * ACAM_W + px;
+        if (z > b->invz[pi]) {
+          b->invz[pi] = z;
+          b->side[pi] = (signed char)side;
+        }
+      }
+  }
+}
+
+/* Renders all surfaces from 'cam' and counts the pixels showing fronts and backs; '*open' gets
+ * the sum over front pixels minus the sum over back pixels of their depth (an open view that
+ * sees far scores higher than one blocked by a near object). 0 if the camera is unusable. */
+static int acam_count(const hr_scene *s, const hr_camera *cam, double znear, acam_buf *b,
+                      int *front, int *back, double *open) {
+  acam_view v;
+  *front = *back = 0;
+  *open = 0;
+  if (!acam_setup(cam, znear, &v)) return 0;
+  memset(b, 0, sizeof *b);
+  for (int i = 0; i < s->nsurfs; i++) {
+    const hr_surface *f = &s->surfs[i];
+    double facing = v3_dot(f->normal, v3_sub(v.eye, f->v[0]));
+    if (facing == 0) continue; /* edge-on */
+    hr_vec3 q[4], c[8];
+    int in = 0;
+    for (int k = 0; k < f->nverts; k++) {
+      hr_vec3 d = v3_sub(f->v[k], v.eye);
+      q[k] = v3(v3_dot(d, v.r), v3_dot(d, v.u), v3_dot(d, v.f));
+      in += q[k].z >= znear;
+    }
+    if (in == 0) continue;
+    int n = 0; /* clip against z = znear (Sutherland-Hodgman, one plane) */
+    for (int k = 0; k < f->nverts; k++) {
+      hr_vec3 a = q[k], bb = q[(k + 1) % f->nverts];
+      int ia = a.z >= znear, ib = bb.z >= znear;
+      if (ia) c[n++] = a;
+      if (ia != ib) c[n++] = v3_lerp(a, bb, (znear - a.z) / (bb.z - a.z));
+    }
+    if (n >= 3) acam_raster(b, &v, c, n, facing > 0 ? 1 : -1);
+  }
+  for (int p = 0; p < ACAM_W * ACAM_H; p++) {
+    *front += b->side[p] > 0;
+    *back += b->side[p] < 0;
+    if (b->side[p]) *open += b->side[p] / (double)b->invz[p];
+  }
+  return 1;
+}
+
+/* Chooses a camera for a scene without one. The heuristic:
+ *  - Up is +y, unless the scene is clearly z-up: its z extent is not larger than its y extent
+ *    (scenes are usually flatter vertically) and at least 1.5 times as much surface area faces
+ *    along +-z as along +-y (floors, ceilings and table tops are the largest surfaces facing
+ *    along the up axis); then up is +z. "Horizontal" below means perpendicular to up.
+ *  - Outside views: the camera looks at the centre of the bounding box from one of the 4
+ *    horizontal axis directions and the 4 horizontal diagonals, each from 10 degrees above the
+ *    horizon and once more looking down from 35 degrees, at the distance where the bounding
+ *    sphere fits a 50 degree field of view. Each candidate is scored by what it would see:
+ *    the scene is rendered into a 64x48 z-buffer and the score is the number of pixels showing
+ *    the front of a surface minus those showing a back (surfaces are one-sided, backs look dark
+ *    and usually mean the camera is on the wrong side of a wall). The first best candidate wins
+ *    (order: +z, +x, -z, -x for y-up (+y, +x, -y, -x for z-up), then the diagonals; 10 degrees
+ *    before 35). An open box is thus seen through its opening.
+ *  - Inside views: when even the best outside view shows more backs than fronts (a closed room:
+ *    every wall faces inwards and occludes the rest from outside), the camera goes inside the
+ *    bounding box, near one of its 4 upper corners: 15% of the extent in from both walls, at 60%
+ *    of the height, looking at the centre of the floor plan at 30% of the height with a 70
+ *    degree field of view. The corner whose view sees the most fronts and the fewest backs,
+ *    each pixel weighted by its depth, wins (a corner inside an object sees backs, one right
+ *    behind an object sees little of the room); it is used only if it shows more fronts minus
+ *    backs than the best outside view.
+ * O(surfaces) per candidate (20 candidates). */
 void hr_scene_auto_camera(const hr_scene *s, hr_camera *cam) {
   hr_vec3 lo, hi;
   hr_scene_bounds(s, &lo, &hi);
+  if (s->nsurfs == 0 || !(hi.x >= lo.x && hi.y >= lo.y && hi.z >= lo.z)) {
+    lo = v3(-1, -1, -1);
+    hi = v3(1, 1, 1);
+  }
   hr_vec3 c = v3_scale(v3_add(lo, hi), 0.5), ext = v3_sub(hi, lo);
   double r = 0.5 * v3_len(ext);
   if (!(r > 0)) r = 1;
-  /* Up is the axis with the smallest extent among y and z when one is clearly flat; default y. */
-  cam->up = (hr_vec3){0, 1, 0};
-  cam->fov_deg = 50;
-  double dist = r / tan(0.5 * cam->fov_deg * M_PI / 180.0) * 1.05;
-  hr_vec3 dir = v3_norm((hr_vec3){0.55, 0.45, 1.0});
-  cam->at = c;
-  cam->eye = v3_add(c, v3_scale(dir, dist));
+  /* up axis */
+  double ay = 0, az = 0;
+  for (int i = 0; i < s->nsurfs; i++) {
+    const hr_surface *f = &s->surfs[i];
+    if (fabs(f->normal.y) > 0.9) ay += f->area;
+    if (fabs(f->normal.z) > 0.9) az += f->area;
+  }
+  int zup = ext.z <= ext.y && az > 1.5 * ay;
+  hr_vec3 up = zup ? v3(0, 0, 1) : v3(0, 1, 0);
+  hr_vec3 h1 = zup ? v3(0, 1, 0) : v3(0, 0, 1); /* first horizontal direction (+z or +y) */
+  hr_vec3 h2 = v3(1, 0, 0);
+  double hup = zup ? ext.z : ext.y;
+  double lo_up = zup ? lo.z : lo.y;
+
+  acam_buf *buf = malloc(sizeof *buf);
+  hr_camera best = {v3_add(c, v3_scale(v3_norm(v3(0.55, 0.45, 1.0)), r / tan(25 * M_PI / 180) * 1.05)),
+                    c, up, 50};
+  if (zup) best.eye = v3_add(c, v3_scale(v3_norm(v3(0.55, 1.0, 0.45)), r / tan(25 * M_PI / 180) * 1.05));
+  if (!buf) {
+    *cam = best;
+    return;
+  }
+  double znear = 1e-4 * r;
+  int best_score = INT32_MIN, best_front = 0, best_back = 0;
+  /* outside candidates */
+  const double dirs[8][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}, {1, 1}, {1, -1}, {-1, 1}, {-1, -1}};
+  const double elev[2] = {10, 35};
+  double dist = r / tan(25 * M_PI / 180) * 1.05;
+  for (int e = 0; e < 2; e++)
+    for (int d = 0; d < 8; d++) {
+      hr_vec3 hd = v3_norm(v3_add(v3_scale(h1, dirs[d][0]), v3_scale(h2, dirs[d][1])));
+      double el = elev[e] * M_PI / 180;
+      hr_vec3 dir = v3_add(v3_scale(hd, cos(el)), v3_scale(up, sin(el)));
+      hr_camera cand = {v3_add(c, v3_scale(dir, dist)), c, up, 50};
+      int fr, bk;
+      double op;
+      if (!acam_count(s, &cand, znear, buf, &fr, &bk, &op)) continue;
+      if (fr - bk > best_score) {
+        best_score = fr - bk;
+        best_front = fr;
+        best_back = bk;
+        best = cand;
+      }
+    }
+  if (best_front < best_back) {
+    /* inside candidates: the 4 upper corners */
+    int in_score = INT32_MIN;
+    double in_open = -INFINITY;
+    hr_camera in_best = best;
+    for (int k = 0; k < 4; k++) {
+      double t1 = (k & 1) ? 0.85 : 0.15, t2 = (k & 2) ? 0.85 : 0.15;
+      /* horizontal coordinates along h1 and h2 */
+      double l1 = v3_dot(lo, h1), e1 = v3_dot(ext, h1), l2 = v3_dot(lo, h2), e2 = v3_dot(ext, h2);
+      hr_vec3 eye = v3_add(v3_scale(h1, l1 + t1 * e1), v3_scale(h2, l2 + t2 * e2));
+      eye = v3_add(eye, v3_scale(up, lo_up + 0.6 * hup));
+      hr_vec3 at = v3_add(v3_scale(h1, v3_dot(c, h1)), v3_scale(h2, v3_dot(c, h2)));
+      at = v3_add(at, v3_scale(up, lo_up + 0.3 * hup));
+      hr_camera cand = {eye, at, up, 70};
+      int fr, bk;
+      double op;
+      if (!acam_count(s, &cand, znear, buf, &fr, &bk, &op)) continue;
+      if (op > in_open) {
+        in_open = op;
+        in_score = fr - bk;
+        in_best = cand;
+      }
+    }
+    if (in_score > best_score) best = in_best;
+  }
+  free(buf);
+  *cam = best;
 }

@@ -1,6 +1,7 @@
 /* test_output.c: mesh reconstruction (cracks, areas, vertex counts, T-vertex values), the PLY,
  * GLB (Khronos glTF-Validator), PNG/PFM writers, the software renderer, and viewer.html opened
- * in headless Chromium. Synthetic leaves are built here with non-uniform (unbalanced) quadtree
+ * in headless Chromium; split polygons (several surfaces of one input polygon) as one smooth
+ * region. Synthetic leaves are built here with non-uniform (unbalanced) quadtree
  * and triangle subdivisions so that T-vertices occur at several nesting depths. */
 #include "output.h"
 #include "vec.h"
@@ -843,6 +844,266 @@ static void test_viewer(const char *dir, const char *glb) {
   }
 }
 
+/* ------------------------------------------------------------------ split polygons */
+
+/* Refinement of the split-polygon scenes: every surface of one input polygon is subdivided
+ * differently, with deep spots on the shared edges (a == 0 is edge 2 of the first triangle of a
+ * split, b == 0 edge 0 of the next one: hr_scene_add_polygon splits into (x,y,z), (x,z,w)), so
+ * that each side holds T-vertices of the other. */
+static int refine_split(int surf, double a0, double b0, double s, int depth) {
+  if (depth < 1) return 1;
+  switch (surf) {
+  case 0:
+    if (depth < 2) return 1;
+    if (depth < 6 && contains(a0, b0, s, 0, 0.3)) return 1;
+    return depth < 4 && contains(a0, b0, s, 0.4, 0.4);
+  case 1:
+    if (depth < 6 && contains(a0, b0, s, 0.7, 0)) return 1;
+    if (depth < 3 && contains(a0, b0, s, 0.2, 0)) return 1;
+    return depth < 4 && contains(a0, b0, s, 0, 0.55);
+  default:
+    if (depth < 3) return 1;
+    return depth < 5 && contains(a0, b0, s, 0.3, 0);
+  }
+}
+
+static int64_t find_pos(const hr_mesh *m, hr_vec3 p) {
+  for (int64_t v = 0; v < m->nverts; v++)
+    if (v3_len(v3_sub(vpos(m, (uint32_t)v), p)) < 1e-6) return v;
+  return -1;
+}
+
+/* 1 if p lies strictly inside segment a-b, up to float rounding (1e-6 absolute, for coordinates
+ * of order 1; the segments tested are longer than 1e-2), with its parameter in *tt. */
+static int inside_seg(hr_vec3 a, hr_vec3 b, hr_vec3 p, double *tt) {
+  hr_vec3 d = v3_sub(b, a), e = v3_sub(p, a);
+  double len2 = v3_dot(d, d), len = sqrt(len2);
+  if (!(len2 > 0)) return 0;
+  double t = v3_dot(e, d) / len2;
+  if (!(t * len > 1e-6 && (1 - t) * len > 1e-6)) return 0;
+  if (v3_len(v3_sub(e, v3_scale(d, t))) > 1e-6) return 0;
+  *tt = t;
+  return 1;
+}
+
+/* Checks the mesh of a scene whose surfaces all come from the one input polygon 'pv' (n
+ * vertices): one smooth region without cracks or seams across the surfaces' shared edges. */
+static void check_poly_mesh(const char *what, const hr_scene *s, const hr_leaf *lv, int64_t n,
+                            const hr_mesh *m, const hr_vec3 *pv, int npv) {
+  for (int f = 0; f < s->nsurfs; f++)
+    CHECK(s->surfs[f].poly == s->surfs[0].poly, "%s: surfaces of different polygons", what);
+  /* triangles: orientation, areas per surface, every vertex used */
+  double *area = calloc((size_t)s->nsurfs, sizeof *area);
+  uint8_t *used = calloc((size_t)m->nverts, 1);
+  int32_t *vsurf = malloc((size_t)m->nverts * sizeof *vsurf);
+  for (int64_t v = 0; v < m->nverts; v++) vsurf[v] = -1;
+  int flipped = 0, degenerate = 0, range = 0;
+  int64_t nmulti = 0; /* vertices used by triangles of several surfaces */
+  for (int64_t t = 0; t < m->ntris; t++) {
+    const uint32_t *T = &m->tri[3 * t];
+    if (T[0] >= m->nverts || T[1] >= m->nverts || T[2] >= m->nverts) {
+      range++;
+      continue;
+    }
+    int f = m->tri_surf[t];
+    hr_vec3 a = vpos(m, T[0]), b = vpos(m, T[1]), c = vpos(m, T[2]);
+    hr_vec3 nn = v3_cross(v3_sub(b, a), v3_sub(c, a));
+    if (!(0.5 * v3_len(nn) > 1e-14)) degenerate++;
+    if (v3_dot(nn, s->surfs[f].normal) <= 0) flipped++;
+    area[f] += 0.5 * v3_len(nn);
+    for (int k = 0; k < 3; k++) {
+      used[T[k]] = 1;
+      if (vsurf[T[k]] == -1)
+        vsurf[T[k]] = f;
+      else if (vsurf[T[k]] >= 0 && vsurf[T[k]] != f) {
+        vsurf[T[k]] = -2;
+        nmulti++;
+      }
+    }
+  }
+  CHECK(range == 0 && flipped == 0 && degenerate == 0,
+        "%s: %d bad indices, %d flipped, %d degenerate triangles", what, range, flipped,
+        degenerate);
+  for (int f = 0; f < s->nsurfs; f++)
+    CHECK(fabs(area[f] - s->surfs[f].area) < 1e-6 * s->surfs[f].area,
+          "%s: surface %d mesh area %.9g != %.9g", what, f, area[f], s->surfs[f].area);
+  int unused = 0;
+  for (int64_t v = 0; v < m->nverts; v++) unused += !used[v];
+  CHECK(unused == 0, "%s: %d unused vertices", what, unused);
+  /* edges: interior ones shared by exactly two triangles in opposite directions; the boundary is
+   * the polygon's outline (no crack along the surfaces' shared edges) */
+  edge *E = malloc((size_t)m->ntris * 3 * sizeof *E);
+  int64_t ne = 0;
+  for (int64_t t = 0; t < m->ntris; t++)
+    for (int k = 0; k < 3; k++) E[ne++] = (edge){m->tri[3 * t + k], m->tri[3 * t + (k + 1) % 3]};
+  qsort(E, (size_t)ne, sizeof *E, cmp_edge_undirected);
+  double blen = 0;
+  int over = 0, samedir = 0, crack = 0;
+  int64_t ncross = 0; /* interior edges between triangles of different surfaces */
+  for (int64_t i = 0; i < ne;) {
+    int64_t j = i + 1;
+    while (j < ne && cmp_edge_undirected(&E[i], &E[j]) == 0) j++;
+    if (j - i == 1) {
+      hr_vec3 a = vpos(m, E[i].a), b = vpos(m, E[i].b), mid = v3_scale(v3_add(a, b), 0.5);
+      blen += v3_len(v3_sub(a, b));
+      int on = 0;
+      double tt;
+      for (int k = 0; k < npv && !on; k++) {
+        hr_vec3 p = pv[k], q = pv[(k + 1) % npv];
+        on = inside_seg(p, q, mid, &tt);
+      }
+      crack += !on;
+    } else if (j - i == 2) {
+      if (E[i].a == E[i + 1].a) samedir++;
+      int fa = vsurf[E[i].a], fb = vsurf[E[i].b];
+      ncross += fa == -2 && fb == -2;
+    } else {
+      over++;
+    }
+    i = j;
+  }
+  double perim = 0;
+  for (int k = 0; k < npv; k++) perim += v3_len(v3_sub(pv[(k + 1) % npv], pv[k]));
+  CHECK(over == 0, "%s: %d edges shared by more than 2 triangles", what, over);
+  CHECK(samedir == 0, "%s: %d interior edges with inconsistent orientation", what, samedir);
+  CHECK(crack == 0, "%s: %d boundary edges inside the polygon (cracks)", what, crack);
+  CHECK(fabs(blen - perim) < 1e-6 * perim, "%s: boundary length %.9g != perimeter %.9g", what,
+        blen, perim);
+  CHECK(nmulti >= 8 && ncross >= 8, "%s: only %lld shared vertices, %lld shared edges", what,
+        (long long)nmulti, (long long)ncross);
+  free(E);
+  /* vertices: one per position */
+  int dups = 0;
+  for (int64_t a = 0; a < m->nverts; a++)
+    for (int64_t b = a + 1; b < m->nverts; b++)
+      dups += v3_len(v3_sub(vpos(m, (uint32_t)a), vpos(m, (uint32_t)b))) < 1e-6;
+  CHECK(dups == 0, "%s: %d duplicate vertices", what, dups);
+  /* every leaf corner has a vertex; values: T-vertices (strictly inside an edge of a leaf of any
+   * surface) interpolate that edge, other corners are the area-weighted mean over all leaves of
+   * the polygon touching them; the rest are centres */
+  int missing = 0, tbad = 0, cbad = 0;
+  int64_t ncorner = 0, ntv = 0, ncross_t = 0;
+  double worst = 0;
+  for (int64_t i = 0; i < n; i++)
+    for (int c = 0; c < lv[i].nverts; c++) missing += find_pos(m, lv[i].p[c]) < 0;
+  for (int64_t v = 0; v < m->nverts; v++) {
+    hr_vec3 p = vpos(m, (uint32_t)v);
+    double wsum = 0, bsum[3] = {0, 0, 0};
+    int is_t = 0, touched = 0;
+    uint32_t touch_mask = 0, t_mask = 0;
+    for (int64_t li = 0; li < n; li++) {
+      const hr_leaf *l = &lv[li];
+      for (int e = 0; e < l->nverts; e++) {
+        hr_vec3 P = l->p[e], Q = l->p[(e + 1) % l->nverts];
+        double tt;
+        if (v3_len(v3_sub(P, p)) < 1e-6) {
+          touched = 1;
+          touch_mask |= 1u << (l->surf & 31);
+          wsum += l->area;
+          for (int k = 0; k < 3; k++) bsum[k] += l->area * l->B[k];
+        } else if (inside_seg(P, Q, p, &tt)) {
+          is_t = 1;
+          t_mask |= 1u << (l->surf & 31);
+          int64_t pv_ = find_pos(m, P), qv = find_pos(m, Q);
+          if (pv_ < 0 || qv < 0) {
+            missing++;
+            continue;
+          }
+          for (int k = 0; k < 3; k++) {
+            double want = (1 - tt) * m->B[3 * pv_ + k] + tt * m->B[3 * qv + k];
+            double d = fabs(m->B[3 * v + k] - want);
+            if (d > worst) worst = d;
+            if (d > 1e-5 * fmax(1.0, fabs(want))) tbad++;
+          }
+        }
+      }
+    }
+    ncorner += touched;
+    ntv += is_t;
+    ncross_t += is_t && (t_mask & ~touch_mask) && (touch_mask & ~t_mask); /* across surfaces */
+    if (touched && !is_t)
+      for (int k = 0; k < 3; k++)
+        if (fabs(m->B[3 * v + k] - bsum[k] / wsum) > 1e-5 * fmax(1.0, fabs(bsum[k] / wsum)))
+          cbad++;
+  }
+  CHECK(missing == 0, "%s: %d leaf corners without a vertex", what, missing);
+  CHECK(tbad == 0, "%s: %d T-vertex values off the coarse edge (worst %.3g): seams", what, tbad,
+        worst);
+  CHECK(cbad == 0, "%s: %d corner values differ from the polygon's area-weighted mean", what,
+        cbad);
+  CHECK(m->nverts == ncorner + m->ncentre, "%s: %lld vertices != %lld corners + %lld centres",
+        what, (long long)m->nverts, (long long)ncorner, (long long)m->ncentre);
+  CHECK(ncross_t >= 4, "%s: only %lld T-vertices across the shared edges", what,
+        (long long)ncross_t);
+  printf("%s: %lld leaves -> %lld vertices (%lld shared by surfaces, %lld T-vertices, %lld across "
+         "surfaces, worst %.2g), %lld triangles, %lld shared interior edges\n",
+         what, (long long)n, (long long)m->nverts, (long long)nmulti, (long long)ntv,
+         (long long)ncross_t, worst, (long long)m->ntris, (long long)ncross);
+  free(area);
+  free(used);
+  free(vsurf);
+}
+
+/* A non-planar quad (two triangle surfaces of one polygon) and a planar pentagon (a fan of three
+ * triangles), each surface subdivided differently, with a linear field. */
+static void test_split(void) {
+  for (int which = 0; which < 2; which++) {
+    hr_scene *s;
+    hr_scene_create("split", &s);
+    double rho[3] = {0.5, 0.5, 0.5}, zero[3] = {0, 0, 0};
+    int grey;
+    hr_scene_add_material(s, "grey", rho, zero, &grey);
+    hr_poly_result r;
+    hr_vec3 quad[4] = {{0, 0, 0}, {1, 0, 0}, {1.1, 1, 0.25}, {0, 0.9, 0}}; /* non-planar */
+    hr_vec3 pent[5];
+    for (int k = 0; k < 5; k++) { /* regular pentagon in a tilted plane */
+      double a = 2 * M_PI * k / 5;
+      pent[k] = v3(cos(a), 0.6 * sin(a), 0.8 * sin(a) + 0.3);
+    }
+    const hr_vec3 *pv = which == 0 ? quad : pent;
+    int npv = which == 0 ? 4 : 5;
+    CHECK(hr_scene_add_polygon(s, pv, npv, grey, &r) == HR_OK && r == HR_POLY_ADDED, "split add");
+    CHECK(s->nsurfs == npv - 2 && s->npolys == 1, "%d-gon became %d surfaces", npv, s->nsurfs);
+    leafvec lv = {0};
+    uint32_t A[2] = {0, 0}, B[2] = {HR_LATTICE, 0}, C[2] = {0, HR_LATTICE};
+    for (int f = 0; f < s->nsurfs; f++) gen_tri(s, &lv, f, A, B, C, 0, refine_split, field);
+    hr_mesh *m = NULL;
+    CHECK(hr_mesh_build(s, lv.v, lv.n, &m) == HR_OK, "split mesh");
+    if (m) check_poly_mesh(which == 0 ? "split quad" : "pentagon fan", s, lv.v, lv.n, m, pv, npv);
+    hr_mesh_destroy(&m);
+    /* two separate polygons sharing an edge stay separate: no vertex shared */
+    if (which == 0) {
+      hr_vec3 q2[3] = {quad[1], {2, 0.5, 0}, quad[2]};
+      hr_scene_add_polygon(s, q2, 3, grey, &r);
+      leafvec l2 = lv;
+      l2.v = malloc((size_t)lv.cap * sizeof *l2.v);
+      memcpy(l2.v, lv.v, (size_t)lv.n * sizeof *l2.v);
+      gen_tri(s, &l2, s->nsurfs - 1, A, B, C, 0, uniform8, field);
+      CHECK(hr_mesh_build(s, l2.v, l2.n, &m) == HR_OK, "split + neighbour mesh");
+      if (m) {
+        int shared = 0;
+        int32_t *vs = malloc((size_t)m->nverts * sizeof *vs);
+        for (int64_t v = 0; v < m->nverts; v++) vs[v] = -1;
+        for (int64_t t = 0; t < m->ntris; t++)
+          for (int k = 0; k < 3; k++) {
+            uint32_t v = m->tri[3 * t + k];
+            int p = s->surfs[m->tri_surf[t]].poly;
+            if (vs[v] == -1)
+              vs[v] = p;
+            else if (vs[v] != p)
+              shared++;
+          }
+        CHECK(shared == 0, "%d vertices shared between different polygons", shared);
+        free(vs);
+      }
+      hr_mesh_destroy(&m);
+      free(l2.v);
+    }
+    free(lv.v);
+    hr_scene_destroy(&s);
+  }
+}
+
 /* ------------------------------------------------------------------ performance */
 
 static int refine_room(int surf, double a0, double b0, double s, int depth) {
@@ -1019,6 +1280,7 @@ int main(void) {
     free(rgb);
   }
   test_deep();
+  test_split();
   test_render(dir);
   test_viewer(dir, glb);
   /* missing three.js is an error naming the path */

@@ -369,6 +369,8 @@ int main(int argc, char **argv) {
   if (c.have_camera) c.cam = c.camera;
   else if (scene->has_camera) c.cam = scene->camera;
   else hr_scene_auto_camera(scene, &c.cam);
+  hr_solver *s = NULL;
+  check(hr_solver_create(scene, &c.opt, &s, &err), &err);
   if (!c.quiet) {
     hr_vec3 lo, hi;
     hr_scene_bounds(scene, &lo, &hi);
@@ -378,8 +380,6 @@ int main(int argc, char **argv) {
             scene->name, scene->npolys, scene->nsurfs, scene->nmats, hr_scene_total_area(scene),
             lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
   }
-  hr_solver *s = NULL;
-  check(hr_solver_create(scene, &c.opt, &s, &err), &err);
   check(hr_solver_run(s, on_iter, &c, &err), &err);
   ensure_outdir(&c);
   char path[8400], name[4200];
