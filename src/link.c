@@ -203,7 +203,7 @@ enum { KEEP = 0, SPLIT_R = 1, SPLIT_S = 2 };
 #define FILTER_MIN 0
 
 static uint8_t decide(const hr_solver *s, const hr_link *l, double bf_e) {
-  if (l->H == 0) return KEEP;
+  if (l->H <= 0) return KEEP; /* invisible, or dead (H < 0) */
   if (link_bf(s, l) <= bf_e) return KEEP;
   const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
   /* The paper subdivides the larger patch if its area is above A_e. */
@@ -225,21 +225,40 @@ static int elem_poly(const hr_solver *s, const hr_elem *e, hr_vec3 *p) {
 hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
   *nnew = 0;
   /* Most iterations split nothing: find out first, without copying the graph. */
-  int any = 0;
-#pragma omp parallel for schedule(static) reduction(| : any) if (s->nlinks > PAR_MIN)
-  for (int64_t i = 0; i < s->nlinks; i++) any |= decide(s, &s->links[i], bf_e) != KEEP;
-  if (!any) return HR_OK;
-  s->sorted = 0;
-  /* 'cur' holds the active links of this round; 'keep' accumulates the final ones. */
-  int64_t ncur = s->nlinks;
-  hr_link *cur = s->links, *keep = NULL, *next = NULL;
+  int64_t nsplit0 = 0;
+#pragma omp parallel for schedule(static) reduction(+ : nsplit0) if (s->nlinks > PAR_MIN)
+  for (int64_t i = 0; i < s->nlinks; i++) nsplit0 += decide(s, &s->links[i], bf_e) != KEEP;
+  if (nsplit0 == 0) return HR_OK;
+  /* Few splits (the usual case late in a level): refine only those links, leave the others in
+   * place and append the results; the graph is compacted and fully sorted once dead and extra
+   * links make up a quarter of it. */
+  int incremental = s->sorted && nsplit0 * 16 < s->nlinks;
+  hr_link *cur, *keep = NULL, *next = NULL;
+  int64_t ncur;
+  if (incremental) {
+    cur = malloc((size_t)nsplit0 * sizeof *cur);
+    if (!cur) return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
+    ncur = 0;
+    for (int64_t i = 0; i < s->nlinks; i++) {
+      hr_link *l = &s->links[i];
+      if (decide(s, l, bf_e) == KEEP) continue;
+      cur[ncur++] = *l;
+      l->H = -1; /* dead */
+      l->F = 0;
+    }
+    s->ndead += ncur;
+  } else {
+    s->sorted = 0;
+    ncur = s->nlinks;
+    cur = s->links;
+    s->links = NULL;
+    s->cap_links = 0;
+  }
   int64_t nkeep = 0, capkeep = 0;
   uint8_t *dec = NULL;
   int64_t *slot = NULL;
   uint8_t *mark = NULL;
   int64_t capmark = 0;
-  s->links = NULL;
-  s->cap_links = 0;
   hr_status st = HR_OK;
   int64_t rays = 0;
   while (ncur > 0) {
@@ -329,35 +348,27 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     free(coff);
     s->npool = pool0 + nchild_cand;
     *nnew += 4 * nsplit;
-    if (cur != s->links) free(cur);
+    free(cur);
     cur = next;
     next = NULL;
     ncur = 4 * nsplit;
   }
-  if (cur && cur != keep) free(cur);
+  free(cur);
   cur = NULL;
-  s->links = keep;
-  s->nlinks = nkeep;
-  s->cap_links = capkeep;
-  keep = NULL;
   s->rays += rays;
-  /* Compact the candidate pool to the lists of the surviving links, in link order. */
-  {
-    int64_t tot = 0;
-    for (int64_t i = 0; i < s->nlinks; i++) tot += s->links[i].ncand;
-    int32_t *np = malloc((size_t)(tot > 0 ? tot : 1) * sizeof *np);
-    if (!np) goto nomem;
-    int64_t o = 0;
-    for (int64_t i = 0; i < s->nlinks; i++) {
-      hr_link *l = &s->links[i];
-      if (l->ncand > 0) memcpy(np + o, s->pool + l->cand_off, (size_t)l->ncand * sizeof *np);
-      l->cand_off = (uint32_t)o;
-      o += l->ncand;
-    }
-    free(s->pool);
-    s->pool = np;
-    s->npool = tot;
-    s->cap_pool = tot > 0 ? tot : 1;
+  if (incremental) {
+    if (!links_reserve(s, s->nlinks + nkeep)) goto nomem;
+    memcpy(s->links + s->nlinks, keep, (size_t)nkeep * sizeof *keep);
+    s->nlinks += nkeep;
+    free(keep);
+    keep = NULL;
+    /* The pool keeps its holes until the next full sort compacts it. */
+    if ((s->nlinks - s->nsorted + s->ndead) * 4 > s->nlinks) s->sorted = 0;
+  } else {
+    s->links = keep;
+    s->nlinks = nkeep;
+    s->cap_links = capkeep;
+    keep = NULL;
   }
   if (s->npool > (int64_t)UINT32_MAX) goto nomem;
   free(dec);
@@ -369,34 +380,80 @@ nomem:
   free(slot);
   free(mark);
   free(next);
-  if (cur && cur != keep) free(cur);
+  free(cur);
   free(keep);
-  s->links = NULL;
-  s->nlinks = 0;
   return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
 }
 
+/* Counting sort of links[lo, hi) by receiver into 'order' (stable); 'start' gets nel+1 offsets. */
+static void group_by_receiver(const hr_solver *s, int64_t lo, int64_t hi, int64_t *start,
+                              int64_t *order) {
+  memset(start, 0, (size_t)(s->nel + 1) * sizeof *start);
+  for (int64_t i = lo; i < hi; i++) start[s->links[i].r + 1]++;
+  for (int64_t e = 0; e < s->nel; e++) start[e + 1] += start[e];
+  for (int64_t i = lo; i < hi; i++) order[start[s->links[i].r]++] = i;
+  for (int64_t e = s->nel; e > 0; e--) start[e] = start[e - 1];
+  start[0] = 0;
+}
+
 hr_status hr_link_sort(hr_solver *s) {
-  if (s->sorted) return HR_OK;
+  if (s->sorted) {
+    /* Incremental state: index the extra links; extend rstart over new elements. */
+    if (s->nrstart < s->nel) {
+      int64_t *st = realloc(s->rstart, (size_t)(s->nel + 1) * sizeof *st);
+      if (!st) return HR_ERR_NOMEM;
+      for (int64_t e = s->nrstart + 1; e <= s->nel; e++) st[e] = st[s->nrstart];
+      s->rstart = st;
+      s->nrstart = s->nel;
+    }
+    int64_t nx = s->nlinks - s->nsorted;
+    int64_t *xs = realloc(s->xstart, (size_t)(s->nel + 1) * sizeof *xs);
+    int64_t *xi = realloc(s->xidx, (size_t)(nx > 0 ? nx : 1) * sizeof *xi);
+    if (xs) s->xstart = xs;
+    if (xi) s->xidx = xi;
+    if (!xs || !xi) return HR_ERR_NOMEM;
+    group_by_receiver(s, s->nsorted, s->nlinks, s->xstart, s->xidx);
+    return HR_OK;
+  }
+  /* Full sort: drop dead links, group by receiver, compact the candidate pool. */
+  int64_t n = 0;
+  for (int64_t i = 0; i < s->nlinks; i++)
+    if (s->links[i].H >= 0) s->links[n++] = s->links[i];
+  s->nlinks = n;
+  s->ndead = 0;
   int64_t *st = realloc(s->rstart, (size_t)(s->nel + 1) * sizeof *st);
   if (!st) return HR_ERR_NOMEM;
   s->rstart = st;
-  memset(st, 0, (size_t)(s->nel + 1) * sizeof *st);
-  for (int64_t i = 0; i < s->nlinks; i++) st[s->links[i].r + 1]++;
-  for (int64_t e = 0; e < s->nel; e++) st[e + 1] += st[e];
-  hr_link *out = malloc((size_t)(s->nlinks > 0 ? s->nlinks : 1) * sizeof *out);
-  int64_t *fill = malloc((size_t)(s->nel > 0 ? s->nel : 1) * sizeof *fill);
-  if (!out || !fill) {
+  s->nrstart = s->nel;
+  int64_t *order = malloc((size_t)(n > 0 ? n : 1) * sizeof *order);
+  hr_link *out = malloc((size_t)(n > 0 ? n : 1) * sizeof *out);
+  int64_t tot = 0;
+  for (int64_t i = 0; i < n; i++) tot += s->links[i].ncand;
+  int32_t *np = malloc((size_t)(tot > 0 ? tot : 1) * sizeof *np);
+  if (!order || !out || !np) {
+    free(order);
     free(out);
-    free(fill);
+    free(np);
     return HR_ERR_NOMEM;
   }
-  memcpy(fill, st, (size_t)s->nel * sizeof *fill);
-  for (int64_t i = 0; i < s->nlinks; i++) out[fill[s->links[i].r]++] = s->links[i];
-  free(fill);
+  group_by_receiver(s, 0, n, st, order);
+  int64_t o = 0;
+  for (int64_t k = 0; k < n; k++) {
+    hr_link l = s->links[order[k]];
+    if (l.ncand > 0) memcpy(np + o, s->pool + l.cand_off, (size_t)l.ncand * sizeof *np);
+    l.cand_off = (uint32_t)o;
+    o += l.ncand;
+    out[k] = l;
+  }
+  free(order);
   free(s->links);
+  free(s->pool);
   s->links = out;
-  s->cap_links = s->nlinks > 0 ? s->nlinks : 1;
+  s->cap_links = n > 0 ? n : 1;
+  s->pool = np;
+  s->npool = tot;
+  s->cap_pool = tot > 0 ? tot : 1;
+  s->nsorted = n;
   s->sorted = 1;
   return HR_OK;
 }

@@ -97,6 +97,8 @@ void hr_solver_destroy(hr_solver **ps) {
   free(s->links);
   free(s->pool);
   free(s->rstart);
+  free(s->xstart);
+  free(s->xidx);
   free(s);
   *ps = NULL;
 }
@@ -106,14 +108,24 @@ static void gather(hr_solver *s) {
 #pragma omp parallel for schedule(dynamic, 256) if (s->nlinks > PAR_MIN)
   for (int64_t e = 0; e < s->nel; e++) {
     double g0 = 0, g1 = 0, g2 = 0;
-    for (int64_t k = s->rstart[e]; k < s->rstart[e + 1]; k++) {
-      const hr_link *l = &s->links[k];
-      const double *b = s->B[l->s];
-      double f = l->F;
-      g0 += f * b[0];
-      g1 += f * b[1];
-      g2 += f * b[2];
-    }
+    if (e < s->nrstart)
+      for (int64_t k = s->rstart[e]; k < s->rstart[e + 1]; k++) {
+        const hr_link *l = &s->links[k];
+        const double *b = s->B[l->s];
+        double f = l->F;
+        g0 += f * b[0];
+        g1 += f * b[1];
+        g2 += f * b[2];
+      }
+    if (s->nlinks > s->nsorted)
+      for (int64_t k = s->xstart[e]; k < s->xstart[e + 1]; k++) {
+        const hr_link *l = &s->links[s->xidx[k]];
+        const double *b = s->B[l->s];
+        double f = l->F;
+        g0 += f * b[0];
+        g1 += f * b[1];
+        g2 += f * b[2];
+      }
     s->G[e][0] = g0;
     s->G[e][1] = g1;
     s->G[e][2] = g2;
@@ -201,7 +213,7 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
       s->t.push_pull += td - tc;
       s->iterations++;
       if (cb) {
-        hr_iter_info info = {s->iterations, bf_e, count_leaves(s), s->nlinks, change,
+        hr_iter_info info = {s->iterations, bf_e, count_leaves(s), s->nlinks - s->ndead, change,
                              hr_now() - s->t_start};
         if (cb(ud, s, &info)) stop = 1;
       }
@@ -234,7 +246,7 @@ void hr_solver_stats(const hr_solver *s, hr_stats *st) {
   st->npolys = s->scene->npolys;
   st->elements = count_leaves(s);
   st->elements_all = s->nel;
-  st->links = s->nlinks;
+  st->links = s->nlinks - s->ndead;
   st->initial_links = s->initial_links;
   st->iterations = s->iterations;
   st->rays = s->rays;

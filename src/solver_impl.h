@@ -55,13 +55,19 @@ struct hr_solver {
   int64_t nel, cap_el;
   double (*B)[3];     /* radiosity per element */
   double (*G)[3];     /* gathered (irradiance-like, before rho) per element */
-  /* links, sorted by receiver after each refinement; rstart[idx]..rstart[idx+1] */
+  /* Links. [0, nsorted) are grouped by receiver: rstart[idx]..rstart[idx+1] (rstart has
+   * nrstart+1 entries; elements created since have none there). Links refined away in an
+   * incremental pass stay in place, dead (H < 0, F = 0), until the next full sort; their
+   * descendants are appended after nsorted ("extra" links), grouped by receiver in
+   * xstart/xidx. All orders follow from the data alone, never from thread scheduling. */
   hr_link *links;
   int64_t nlinks, cap_links;
   int32_t *pool;
   int64_t npool, cap_pool;
-  int64_t *rstart;    /* [nel+1], valid after hr_link_sort while 'sorted' */
-  int sorted;
+  int64_t *rstart, nrstart;
+  int64_t nsorted, ndead;
+  int64_t *xstart, *xidx; /* extras by receiver: xidx[xstart[e]..xstart[e+1]) index links */
+  int sorted;             /* 0: a full sort is due */
   /* counters */
   int64_t rays, initial_links;
   int iterations, converged, threads;
@@ -92,7 +98,7 @@ uint64_t hr_hash4(uint64_t seed, uint64_t a, uint64_t b, uint64_t i);
 hr_status hr_link_init(hr_solver *s, hr_err *err);          /* paper 2.2.1 */
 /* One refinement pass at threshold 'bf_e' (relative); returns new link count through 'nnew'. */
 hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err); /* 2.2.2 */
-hr_status hr_link_sort(hr_solver *s); /* groups links by receiver, fills rstart */
+hr_status hr_link_sort(hr_solver *s); /* groups links by receiver (rstart, xstart/xidx) */
 
 /* solve.c */
 double hr_now(void);
