@@ -62,10 +62,22 @@ jnum() {
   printf '%s' "$v"
 }
 
+# CPU actually available: NPROC busy loops of fixed work at once; (user + sys) / real = the
+# number of cores they got (NPROC on an idle machine, less when other work is running).
+probe_cores() {
+  local TIMEFORMAT='%R %U %S' t
+  t=$({ time {
+    for ((i = 0; i < NPROC; i++)); do awk 'BEGIN { for (i = 0; i < 1e7; i++) s += i }' & done
+    wait
+  }; } 2>&1)
+  awk -v n="$NPROC" '{ printf "%.2f of %d cores", ($2 + $3) / $1, n }' <<<"$t"
+}
+
 cpu_model=$(sed -n 's/^model name[[:space:]]*: //p' /proc/cpuinfo | head -n 1)
 mem_gib=$(awk '/^MemTotal:/ {printf "%.1f", $2 / 1048576}' /proc/meminfo)
 echo "== hrad benchmark: $(date '+%Y-%m-%d %H:%M %Z'), $(hostname)"
 echo "   $NPROC cores ($cpu_model), $mem_gib GiB; load average before: $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "   CPU available to an $NPROC-thread job (busy-loop probe): $(probe_cores) before the runs"
 echo "   binary $HRAD; results in $BENCH_OUT"
 echo "   minimum of $REPS runs per timing (museum: $MUSEUM_REPS); times are wall-clock seconds"
 echo
@@ -104,6 +116,7 @@ for scene in $SCENES; do
   done
 done
 load_after=$(cut -d' ' -f1-3 /proc/loadavg)
+probe_after=$(probe_cores)
 
 # Per (scene, threads): the minimum of every time column over the runs. refine = refine + gather
 # (the paper's refine column includes do_link); sum = init + refine + gather + push-pull of the
@@ -203,21 +216,22 @@ echo "   columns: minimum over the runs of each time (s); refine = refine + gath
 echo "   sum = init graph + refine + push-pull; links/s = links / total; Mrays/s = rays /"
 echo "   (init graph + refine without gather); speedup = sum(1 thread) / sum; RSS = peak RSS;"
 echo "   'passive': the same with OMP_WAIT_POLICY=passive (threads sleep instead of spinning)."
-echo "   load average after the runs: $load_after"
+echo "   load average after the runs: $load_after; CPU available (probe): $probe_after"
 echo
 
 # ---------------------------------------------------------------- 2. ray rates
 echo "== ray rates, one thread: Embree raw packets vs the solver (bench/rayrate.c)"
 RR=$BENCH_OUT/rayrate.csv
+# shellcheck disable=SC2086 # SCENES is a word list
 "$RAYRATE" --links 50000 --reps 5 --csv "$RR" $SCENES || die "rayrate failed"
 echo
 printf '   %-7s %14s %16s %16s %14s %14s\n' scene "solver Mrays/s" "raw16 all Mr/s" \
   "raw16 vis Mr/s" "hr_vis all" "raw16/solver"
 for scene in $SCENES; do
   solver=$(awk -F, -v s="$scene" 'NR > 1 && $1 == s && $2 == 1 && $3 == "default" {print $15}' "$SUMMARY")
-  rawa=$(awk -F, -v s="$scene" '$1 == s && $2 == "all" && $3 == "embree-raw16" {print $6}' "$RR")
-  rawv=$(awk -F, -v s="$scene" '$1 == s && $2 == "visible" && $3 == "embree-raw16" {print $6}' "$RR")
-  hvis=$(awk -F, -v s="$scene" '$1 == s && $2 == "all" && $3 == "hr_vis" {print $6}' "$RR")
+  rawa=$(awk -F, -v s="$scene" '$1 == s && $2 == "all" && $3 == "embree-raw16" {print $7}' "$RR")
+  rawv=$(awk -F, -v s="$scene" '$1 == s && $2 == "visible" && $3 == "embree-raw16" {print $7}' "$RR")
+  hvis=$(awk -F, -v s="$scene" '$1 == s && $2 == "all" && $3 == "hr_vis" {print $7}' "$RR")
   [[ -n $solver ]] || continue
   awk -v s="$scene" -v a="$solver" -v b="${rawa:-0}" -v c="${rawv:-0}" -v d="${hvis:-0}" 'BEGIN {
     printf "   %-7s %14.2f %16.2f %16.2f %14.2f %7.1f-%.1fx\n", s, a, b, c, d, \
@@ -226,8 +240,10 @@ done
 echo "   solver Mrays/s = rays / (init graph + refine) of the 1-thread run: every second of the"
 echo "   ray-casting phases counted as ray time (form factors, shafts, refinement decisions too),"
 echo "   so it is a lower bound on the solver's own ray rate (an upper bound on its time per ray)."
-echo "   raw16: rtcOccluded16, one 16-ray packet per link, no filter (wall-clock, best of 5);"
-echo "   'all' = random facing surface pairs, 'vis' = those with a visible segment."
+echo "   raw16: rtcOccluded16, one 16-ray packet per link, no filter; hr_vis: hr_vis_segments."
+echo "   rayrate columns here are thread CPU time (best of 5), robust to a busy machine; the"
+echo "   solver column is wall-clock (best of the runs). 'all' = random facing surface pairs,"
+echo "   'vis' = those with a visible segment. raw16/solver: the range over 'all' and 'vis'."
 echo
 
 # ---------------------------------------------------------------- 3. speedup plot

@@ -20,7 +20,7 @@
 #define HR_GID_PATH_BITS 41
 
 /* Loops shorter than this run on one thread: a parallel region costs more than the work. */
-#define PAR_MIN 20000
+#define PAR_MIN 100000
 
 typedef struct hr_elem {
   uint64_t gid;

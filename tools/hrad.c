@@ -15,8 +15,6 @@
 #include <unistd.h>
 #include <dirent.h>
 
-#define MAX_EMIT 64
-
 typedef struct cli {
   hr_options opt;
   const char *scene_arg;
@@ -28,9 +26,9 @@ typedef struct cli {
   hr_camera camera;
   int w, h;
   double exposure; /* 0 = automatic */
-  int nemit;
-  char *emit_name[MAX_EMIT];
-  double emit_rgb[MAX_EMIT][3];
+  int nemit, cap_emit;
+  char **emit_name;
+  double (*emit_rgb)[3];
   /* run state */
   char tmpdir[4096];
   int outdir_made;
@@ -129,7 +127,12 @@ static void parse_emit(cli *c, const char *v) {
     die_usage("--emit: expected NAME=R,G,B, got '%s'", v);
   for (int k = 0; k < 3; k++)
     if (rgb[k] < 0) die_usage("--emit: negative radiosity in '%s'", v);
-  if (c->nemit == MAX_EMIT) die_usage("--emit: more than %d materials", MAX_EMIT);
+  if (c->nemit == c->cap_emit) {
+    c->cap_emit = c->cap_emit ? 2 * c->cap_emit : 8;
+    c->emit_name = realloc(c->emit_name, (size_t)c->cap_emit * sizeof *c->emit_name);
+    c->emit_rgb = realloc(c->emit_rgb, (size_t)c->cap_emit * sizeof *c->emit_rgb);
+    if (!c->emit_name || !c->emit_rgb) die_usage("out of memory");
+  }
   c->emit_name[c->nemit] = strndup(v, (size_t)(eq - v));
   memcpy(c->emit_rgb[c->nemit], rgb, sizeof rgb);
   c->nemit++;
@@ -365,6 +368,8 @@ int main(int argc, char **argv) {
     check(hr_scene_set_emit(scene, c.emit_name[i], c.emit_rgb[i], &err), &err);
     free(c.emit_name[i]);
   }
+  free(c.emit_name);
+  free(c.emit_rgb);
   c.scene = scene;
   if (c.have_camera) c.cam = c.camera;
   else if (scene->has_camera) c.cam = scene->camera;
