@@ -15,6 +15,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* ncand of a link whose candidate list has not been built yet (initial links). */
+#define NO_LIST (-1)
+
 /* ---------------------------------------------------------------- growable arrays */
 
 static int links_reserve(hr_solver *s, int64_t need) {
@@ -84,8 +87,6 @@ static int in_front(const hr_surface *a, const hr_surface *b) {
 typedef struct row {
   hr_link *links;
   int nlinks, cap;
-  int32_t *cand;
-  int ncand, capc;
   int64_t rays;
   int err;
 } row;
@@ -102,95 +103,56 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
                       n, pairs, s->opt.max_links);
   row *rows = calloc((size_t)n, sizeof *rows);
   if (!rows) return hr_err_set(err, HR_ERR_NOMEM, "out of memory in initial linking");
-  int failed = 0;
-#pragma omp parallel if (n > 16)
-  {
-    int32_t *tmp = NULL;
-    int ntmp = 0, captmp = 0;
-#pragma omp for schedule(dynamic, 4)
-    for (int i = 0; i < n; i++) {
-      row *rw = &rows[i];
-      const hr_surface *a = &sc->surfs[i];
-      for (int j = i + 1; j < n; j++) {
-        const hr_surface *b = &sc->surfs[j];
-        if (!in_front(a, b) || !in_front(b, a)) continue;
-        /* The k segments are first cast against the whole scene: most pairs of a large scene
-         * are hidden from each other, and for them the shaft query would be wasted. A pair all
-         * of whose k segments are blocked is taken as mutually invisible. The conservative
-         * candidate list gives the same H, so H is not cast again. */
-        double h = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, &rw->rays);
-        if (h == 0) continue;
-        ntmp = 0;
-        if (hr_shaft_candidates(s->shaft, a->v, a->nverts, i, b->v, b->nverts, j, &tmp, &ntmp,
-                                &captmp) != HR_OK) {
+#pragma omp parallel for schedule(dynamic, 4) if (n > 16)
+  for (int i = 0; i < n; i++) {
+    row *rw = &rows[i];
+    const hr_surface *a = &sc->surfs[i];
+    for (int j = i + 1; j < n; j++) {
+      const hr_surface *b = &sc->surfs[j];
+      if (!in_front(a, b) || !in_front(b, a)) continue;
+      /* The k segments are cast against the whole scene: most pairs of a large scene are
+       * hidden from each other, and most initial links are never refined, so a candidate list
+       * is built only when a link first splits (see hr_link_refine). A pair all of whose k
+       * segments are blocked is taken as mutually invisible. */
+      double h = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, &rw->rays);
+      if (h == 0) continue;
+      if (rw->nlinks + 2 > rw->cap) {
+        int nc = rw->cap ? rw->cap * 2 : 16;
+        hr_link *l = realloc(rw->links, (size_t)nc * sizeof *l);
+        if (!l) {
           rw->err = 1;
           break;
         }
-        if (ntmp == 0) h = 1.0; /* nothing can block: exact */
-        double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
-        double fji = hr_ff_unoccluded(s, &s->el[j], &s->el[i]);
-        if (rw->nlinks + 2 > rw->cap) {
-          int nc = rw->cap ? rw->cap * 2 : 16;
-          hr_link *l = realloc(rw->links, (size_t)nc * sizeof *l);
-          if (!l) {
-            rw->err = 1;
-            break;
-          }
-          rw->links = l;
-          rw->cap = nc;
-        }
-        if (rw->ncand + ntmp > rw->capc) {
-          int nc = rw->capc ? rw->capc : 64;
-          while (nc < rw->ncand + ntmp) nc *= 2;
-          int32_t *c = realloc(rw->cand, (size_t)nc * sizeof *c);
-          if (!c) {
-            rw->err = 1;
-            break;
-          }
-          rw->cand = c;
-          rw->capc = nc;
-        }
-        if (ntmp > 0) memcpy(rw->cand + rw->ncand, tmp, (size_t)ntmp * sizeof *tmp);
-        /* Both directions share one candidate list (offset relative to the row for now). */
-        hr_link lij = {i, j, (float)(fij * h), (float)h, (uint32_t)rw->ncand, ntmp};
-        hr_link lji = {j, i, (float)(fji * h), (float)h, (uint32_t)rw->ncand, ntmp};
-        rw->links[rw->nlinks++] = lij;
-        rw->links[rw->nlinks++] = lji;
-        rw->ncand += ntmp;
+        rw->links = l;
+        rw->cap = nc;
       }
+      double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
+      double fji = hr_ff_unoccluded(s, &s->el[j], &s->el[i]);
+      rw->links[rw->nlinks++] = (hr_link){i, j, (float)(fij * h), (float)h, 0, NO_LIST};
+      rw->links[rw->nlinks++] = (hr_link){j, i, (float)(fji * h), (float)h, 0, NO_LIST};
     }
-    free(tmp);
   }
-  int64_t nl = 0, nc = 0;
+  int64_t nl = 0;
+  int failed = 0;
   for (int i = 0; i < n; i++) {
     failed |= rows[i].err;
     nl += rows[i].nlinks;
-    nc += rows[i].ncand;
     s->rays += rows[i].rays;
   }
   hr_status st = HR_OK;
-  if (failed || !links_reserve(s, nl) || !pool_reserve(&s->pool, &s->cap_pool, nc)) {
+  if (failed || !links_reserve(s, nl)) {
     st = hr_err_set(err, HR_ERR_NOMEM, "out of memory in initial linking");
   } else {
-    int64_t ol = 0, oc = 0;
+    int64_t ol = 0;
     for (int i = 0; i < n; i++) {
-      for (int k = 0; k < rows[i].nlinks; k++) {
-        hr_link l = rows[i].links[k];
-        l.cand_off += (uint32_t)oc;
-        s->links[ol++] = l;
-      }
-      if (rows[i].ncand > 0)
-        memcpy(s->pool + oc, rows[i].cand, (size_t)rows[i].ncand * sizeof(int32_t));
-      oc += rows[i].ncand;
+      if (rows[i].nlinks > 0)
+        memcpy(s->links + ol, rows[i].links, (size_t)rows[i].nlinks * sizeof(hr_link));
+      ol += rows[i].nlinks;
     }
     s->nlinks = nl;
-    s->npool = nc;
     s->initial_links = nl;
   }
-  for (int i = 0; i < n; i++) {
-    free(rows[i].links);
-    free(rows[i].cand);
-  }
+  for (int i = 0; i < n; i++) free(rows[i].links);
   free(rows);
   return st;
 }
@@ -201,6 +163,13 @@ enum { KEEP = 0, SPLIT_R = 1, SPLIT_S = 2 };
 
 /* Candidate lists up to this long are inherited unfiltered by child links. */
 #define FILTER_MIN 0
+
+/* Element polygon (world corners) for shaft filtering. */
+static int elem_poly(const hr_solver *s, const hr_elem *e, hr_vec3 *p) {
+  int n = s->scene->surfs[e->surf].nverts;
+  for (int k = 0; k < n; k++) p[k] = e->p[k];
+  return n;
+}
 
 static uint8_t decide(const hr_solver *s, const hr_link *l, double bf_e) {
   if (l->H <= 0) return KEEP; /* invisible, or dead (H < 0) */
@@ -215,11 +184,50 @@ static uint8_t decide(const hr_solver *s, const hr_link *l, double bf_e) {
   return KEEP;
 }
 
-/* Element polygon (world corners) for shaft filtering. */
-static int elem_poly(const hr_solver *s, const hr_elem *e, hr_vec3 *p) {
-  int n = s->scene->surfs[e->surf].nverts;
-  for (int k = 0; k < n; k++) p[k] = e->p[k];
-  return n;
+/* Builds the candidate lists that splitting links (dec != KEEP) do not have yet (NO_LIST):
+ * shaft queries through the BVH in parallel, then appended to the pool in link order. */
+static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uint8_t *dec) {
+  int64_t nb = 0;
+  for (int64_t i = 0; i < ncur; i++) nb += dec[i] != KEEP && cur[i].ncand == NO_LIST;
+  if (nb == 0) return HR_OK;
+  int64_t *which = malloc((size_t)nb * sizeof *which);
+  int32_t **lists = calloc((size_t)nb, sizeof *lists);
+  int *lens = calloc((size_t)nb, sizeof *lens);
+  int failed = 0;
+  if (!which || !lists || !lens) failed = 1;
+  if (!failed) {
+    int64_t k = 0;
+    for (int64_t i = 0; i < ncur; i++)
+      if (dec[i] != KEEP && cur[i].ncand == NO_LIST) which[k++] = i;
+#pragma omp parallel for schedule(dynamic, 16) reduction(| : failed) if (nb > 64)
+    for (int64_t k2 = 0; k2 < nb; k2++) {
+      const hr_link *l = &cur[which[k2]];
+      const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
+      hr_vec3 pa[4], pb[4];
+      int na = elem_poly(s, r, pa), nbv = elem_poly(s, j, pb), cap = 0;
+      failed |= hr_shaft_candidates(s->shaft, pa, na, r->surf, pb, nbv, j->surf, &lists[k2],
+                                    &lens[k2], &cap) != HR_OK;
+    }
+  }
+  if (!failed) {
+    int64_t tot = 0;
+    for (int64_t k = 0; k < nb; k++) tot += lens[k];
+    if (!pool_reserve(&s->pool, &s->cap_pool, s->npool + tot)) failed = 1;
+  }
+  if (!failed) {
+    for (int64_t k = 0; k < nb; k++) {
+      hr_link *l = &cur[which[k]];
+      l->cand_off = (uint32_t)s->npool;
+      l->ncand = lens[k];
+      if (lens[k] > 0) memcpy(s->pool + s->npool, lists[k], (size_t)lens[k] * sizeof(int32_t));
+      s->npool += lens[k];
+    }
+  }
+  for (int64_t k = 0; lists && k < nb; k++) free(lists[k]);
+  free(lists);
+  free(lens);
+  free(which);
+  return failed ? HR_ERR_NOMEM : HR_OK;
 }
 
 hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
@@ -267,6 +275,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     if (!dec || !slot) goto nomem;
 #pragma omp parallel for schedule(static) if (ncur > PAR_MIN)
     for (int64_t i = 0; i < ncur; i++) dec[i] = decide(s, &cur[i], bf_e);
+    if (build_lists(s, cur, ncur, dec) != HR_OK) goto nomem;
     /* Subdivide the marked elements in link order (deterministic element indices). */
     if (capmark < s->nel) {
       uint8_t *m = realloc(mark, (size_t)s->nel);
@@ -428,7 +437,7 @@ hr_status hr_link_sort(hr_solver *s) {
   int64_t *order = malloc((size_t)(n > 0 ? n : 1) * sizeof *order);
   hr_link *out = malloc((size_t)(n > 0 ? n : 1) * sizeof *out);
   int64_t tot = 0;
-  for (int64_t i = 0; i < n; i++) tot += s->links[i].ncand;
+  for (int64_t i = 0; i < n; i++) tot += s->links[i].ncand > 0 ? s->links[i].ncand : 0;
   int32_t *np = malloc((size_t)(tot > 0 ? tot : 1) * sizeof *np);
   if (!order || !out || !np) {
     free(order);
@@ -441,8 +450,10 @@ hr_status hr_link_sort(hr_solver *s) {
   for (int64_t k = 0; k < n; k++) {
     hr_link l = s->links[order[k]];
     if (l.ncand > 0) memcpy(np + o, s->pool + l.cand_off, (size_t)l.ncand * sizeof *np);
-    l.cand_off = (uint32_t)o;
-    o += l.ncand;
+    if (l.ncand >= 0) {
+      l.cand_off = (uint32_t)o;
+      o += l.ncand;
+    }
     out[k] = l;
   }
   free(order);

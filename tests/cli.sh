@@ -46,9 +46,9 @@ if "$hrad" --quiet $opts -o "$t/r1" --threads 1 room; then
   el=$(json "$t/r1/stats.json" elements); li=$(json "$t/r1/stats.json" links)
   it=$(json "$t/r1/stats.json" iterations)
   echo "     room: elements $el links $li iterations $it"
-  [ "$el" = "${GOLD_ELEMENTS:-3546}" ] && ok "room elements golden ($el)" || bad "room elements $el (golden ${GOLD_ELEMENTS:-3546})"
-  [ "$li" = "${GOLD_LINKS:-37747}" ] && ok "room links golden ($li)" || bad "room links $li (golden ${GOLD_LINKS:-37747})"
-  [ "$it" = "${GOLD_ITERS:-16}" ] && ok "room iterations golden ($it)" || bad "room iterations $it (golden ${GOLD_ITERS:-16})"
+  [ "$el" = "${GOLD_ELEMENTS:-3348}" ] && ok "room elements golden ($el)" || bad "room elements $el (golden ${GOLD_ELEMENTS:-3348})"
+  [ "$li" = "${GOLD_LINKS:-36976}" ] && ok "room links golden ($li)" || bad "room links $li (golden ${GOLD_LINKS:-36976})"
+  [ "$it" = "${GOLD_ITERS:-15}" ] && ok "room iterations golden ($it)" || bad "room iterations $it (golden ${GOLD_ITERS:-15})"
   for n in 2 3 4; do
     "$hrad" --quiet $opts -o "$t/r$n" --threads $n room
     cmp -s "$t/r1/surfaces.csv" "$t/r$n/surfaces.csv" && ok "room surfaces.csv identical with $n threads" \
