@@ -10,6 +10,8 @@
 #include "solver_impl.h"
 #include "vec.h"
 
+#include <string.h>
+
 static inline uint64_t mix64(uint64_t z) {
   z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
   z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
@@ -40,28 +42,56 @@ double hr_ff_unoccluded(const hr_solver *s, const hr_elem *r, const hr_elem *j) 
 #define CHUNK 64
 
 double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
-                        const int32_t *cand, int ncand, int64_t *rays) {
-  if (ncand == 0) return 1.0;
-  /* Order the pair by gid so that H(a,b) == H(b,a). */
-  if (a->gid > b->gid) {
+                        const int32_t *cand, int ncand, int64_t *rays, double fmc[2]) {
+  if (ncand == 0 && !fmc) return 1.0;
+  /* Order the pair by gid so that H(a,b) == H(b,a); fmc follows the caller's order. */
+  int swapped = a->gid > b->gid;
+  if (swapped) {
     const hr_elem *t = a;
     a = b;
     b = t;
   }
+  /* Ray-cast point-to-disk sums (Wallace et al.), over all samples drawn: kab for a receiving
+   * from b, kba for b receiving from a. */
+  double kab = 0, kba = 0;
   int k = s->opt.rays;
-  int visible = 0;
+  int visible = 0, counted = 0;
+  const hr_vec3 na = s->scene->surfs[a->surf].normal, nb = s->scene->surfs[b->surf].normal;
+  /* One hash of (seed, pair) keys the pair; each sample's two words are one mix away. */
+  uint64_t key = hr_hash4(s->opt.seed, a->gid, b->gid, 0);
   float org[CHUNK * 3], dst[CHUNK * 3];
   uint8_t vis[CHUNK];
-  for (int i0 = 0; i0 < k; i0 += CHUNK) {
-    int n = k - i0 < CHUNK ? k - i0 : CHUNK;
-    for (int q = 0; q < n; q++) {
-      int i = i0 + q;
-      uint64_t h1 = hr_hash4(s->opt.seed, a->gid, b->gid, (uint64_t)i * 2);
-      uint64_t h2 = hr_hash4(s->opt.seed, a->gid, b->gid, (uint64_t)i * 2 + 1);
+  double wab[CHUNK], wba[CHUNK];
+  /* Sample index i runs on until k samples count (or 8k were drawn: the front parts are then
+   * a sliver and H hardly matters), so that H always rests on k segments. */
+  int i = 0, maxi = 8 * k;
+  while (counted < k && i < maxi) {
+    int n = 0;
+    for (; n < CHUNK && counted + n < k && i < maxi; i++) {
+      uint64_t h1 = mix64(key + (uint64_t)(2 * i + 1) * UINT64_C(0x9e3779b97f4a7c15));
+      uint64_t h2 = mix64(key + (uint64_t)(2 * i + 2) * UINT64_C(0x9e3779b97f4a7c15));
       /* Stratified in the first parameter of each end, uniform in the second. */
-      double ua = (i + unit(h1)) / k, va = unit(h1 << 26 | h1 >> 38);
-      double ub = unit(h2), vb = ((i * 7 + 3) % k + unit(h2 << 26 | h2 >> 38)) / k;
+      int si = i % k;
+      double ua = (si + unit(h1)) / k, va = unit(h1 << 26 | h1 >> 38);
+      double ub = unit(h2), vb = ((si * 7 + 3) % k + unit(h2 << 26 | h2 >> 38)) / k;
       hr_vec3 p = hr_elem_point(s, a, ua, va), t = hr_elem_point(s, b, ub, vb);
+      /* Only the parts of the two elements in front of each other exchange light: a sample
+       * with an end behind the other element's plane is not counted (when an element straddles
+       * the other's plane, such segments run through whatever solid the straddled surface
+       * bounds, and would make H a matter of chance). */
+      if (v3_dot(v3_sub(p, b->c), nb) <= 0 || v3_dot(v3_sub(t, a->c), na) <= 0) continue;
+      int q = n++;
+      if (fmc) {
+        hr_vec3 d = v3_sub(t, p);
+        double r2 = v3_dot(d, d), ca = v3_dot(na, d), cb = -v3_dot(nb, d);
+        if (ca > 0 && cb > 0 && r2 > 0) {
+          double g = ca * cb / r2; /* cos_a cos_b times r^2 */
+          wab[q] = g / (M_PI * r2 + b->area / k);
+          wba[q] = g / (M_PI * r2 + a->area / k);
+        } else {
+          wab[q] = wba[q] = 0;
+        }
+      }
       org[3 * q] = (float)p.x;
       org[3 * q + 1] = (float)p.y;
       org[3 * q + 2] = (float)p.z;
@@ -69,14 +99,32 @@ double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
       dst[3 * q + 1] = (float)t.y;
       dst[3 * q + 2] = (float)t.z;
     }
-    if (ncand < 0)
+    if (n == 0) continue;
+    if (ncand == 0)
+      memset(vis, 1, (size_t)n);
+    else if (ncand < 0 || ncand > CAND_BRUTE_MAX)
       hr_vis_segments(s->vis, n, org, dst, a->surf, b->surf, vis);
-    else if (ncand <= CAND_BRUTE_MAX)
-      hr_vis_segments_cand(s->scene, cand, ncand, n, org, dst, a->surf, b->surf, vis);
     else
-      hr_vis_segments(s->vis, n, org, dst, a->surf, b->surf, vis);
-    for (int q = 0; q < n; q++) visible += vis[q];
+      hr_vis_segments_cand(s->scene, cand, ncand, n, org, dst, a->surf, b->surf, vis);
+    for (int q = 0; q < n; q++) {
+      visible += vis[q];
+      if (fmc && vis[q]) {
+        kab += wab[q];
+        kba += wba[q];
+      }
+    }
+    counted += n;
+    if (ncand != 0) *rays += n;
   }
-  *rays += k;
-  return (double)visible / k;
+  if (fmc) {
+    /* Each drawn sample stands for 1/i of both areas: F_ab ~ A_b/i sum(cos cos / (pi r^2 +
+     * A_b/k)) over the visible front-facing ones. */
+    double fab = i > 0 ? b->area * kab / i : 0, fba = i > 0 ? a->area * kba / i : 0;
+    fmc[0] = swapped ? fba : fab;
+    fmc[1] = swapped ? fab : fba;
+  }
+  /* No sample counted: the front parts are slivers. That is no evidence of blocking: H = 1
+   * keeps the link, whose centre form factor is then almost surely 0; the refinement oracle
+   * bounds it, and its children sample their own front parts. */
+  return counted > 0 ? (double)visible / counted : 1.0;
 }

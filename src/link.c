@@ -45,13 +45,35 @@ static int pool_reserve(int32_t **pool, int64_t *cap, int64_t need) {
 /* ---------------------------------------------------------------- link evaluation */
 
 /* Fills F and H of link 'l' (receiver, source and candidate list already set). */
+/* 1 if some corner of 'b' lies in front of the plane of element 'a'. */
+static int elem_in_front(const hr_solver *s, const hr_elem *a, const hr_elem *b) {
+  hr_vec3 n = s->scene->surfs[a->surf].normal;
+  int nv = s->scene->surfs[b->surf].nverts;
+  double size = sqrt(a->area + b->area);
+  for (int k = 0; k < nv; k++)
+    if (v3_dot(v3_sub(b->p[k], a->c), n) > 1e-9 * size) return 1;
+  return 0;
+}
+
+/* Fills F and H of link 'l' (receiver, source and candidate list already set): eq. (2) times H
+ * when the centres face each other; when only parts do, the ray-cast point-to-disk form factor
+ * over the sampled segments (eq. (2) would give 0 and drop light that does arrive); when no part
+ * faces the other, F = H = 0. */
 static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64_t *rays) {
   const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
-  double f = hr_ff_unoccluded(s, r, j);
-  double h = 1.0;
-  if (f > 0) h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, rays);
+  double f = hr_ff_unoccluded(s, r, j), h;
+  if (f > 0) {
+    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, rays, NULL);
+    f *= h;
+  } else if (elem_in_front(s, r, j) && elem_in_front(s, j, r)) {
+    double fmc[2];
+    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, rays, fmc);
+    f = fmc[0];
+  } else {
+    h = 0;
+  }
   l->H = (float)h;
-  l->F = (float)(f * h);
+  l->F = (float)f;
 }
 
 /* Refinement oracle: the largest energy, relative to the brightest emitter, that the link would
@@ -62,9 +84,16 @@ static double link_bf(const hr_solver *s, const hr_link *l) {
   const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
   const double *rho = s->scene->mats[s->scene->surfs[r->surf].material].rho;
   double f = l->F;
+  if (l->H > 0 && l->H < 1) {
+    /* Partly visible: H rests on k rays and varies across the elements (a shadow boundary
+     * crosses them); refine as if unoccluded, so that visibility is resolved by refinement
+     * instead of by the noise of one coarse estimate. */
+    double fu = hr_ff_unoccluded(s, r, j);
+    f = fu > f ? fu : f;
+  }
   if (f == 0 && l->H > 0) {
     double r2 = v3_dot(v3_sub(j->c, r->c), v3_sub(j->c, r->c));
-    f = l->H * j->area / (M_PI * r2 + j->area);
+    f = j->area / (M_PI * r2 + j->area);
   }
   double m = 0;
   for (int c = 0; c < 3; c++) {
@@ -114,7 +143,8 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
        * hidden from each other, and most initial links are never refined, so a candidate list
        * is built only when a link first splits (see hr_link_refine). A pair all of whose k
        * segments are blocked is taken as mutually invisible. */
-      double h = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, &rw->rays);
+      double fmc[2];
+      double h = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, &rw->rays, fmc);
       if (h == 0) continue;
       if (rw->nlinks + 2 > rw->cap) {
         int nc = rw->cap ? rw->cap * 2 : 16;
@@ -126,10 +156,13 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
         rw->links = l;
         rw->cap = nc;
       }
+      /* Eq. (2) where the centres face each other, else the ray-cast estimate (link_eval). */
       double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
       double fji = hr_ff_unoccluded(s, &s->el[j], &s->el[i]);
-      rw->links[rw->nlinks++] = (hr_link){i, j, (float)(fij * h), (float)h, 0, NO_LIST};
-      rw->links[rw->nlinks++] = (hr_link){j, i, (float)(fji * h), (float)h, 0, NO_LIST};
+      fij = fij > 0 ? fij * h : fmc[0];
+      fji = fji > 0 ? fji * h : fmc[1];
+      rw->links[rw->nlinks++] = (hr_link){i, j, (float)fij, (float)h, 0, NO_LIST};
+      rw->links[rw->nlinks++] = (hr_link){j, i, (float)fji, (float)h, 0, NO_LIST};
     }
   }
   int64_t nl = 0;

@@ -639,7 +639,8 @@ hr_status hr_mesh_build(const hr_scene *s, const hr_leaf *leaves, int64_t n, hr_
     if (p < np)
       while (r1 < ns && POLY_OF(sorder[r1]) == p) r1++;
     int64_t b = r0 > 0 ? cnt[r0 - 1] : 0, e = cnt[r1 - 1];
-    if (e > b) st = build_group(&bd, s, sorder + r0, r1 - r0, slocal, leaves, idx + b, e - b, order);
+    if (e > b)
+      st = build_group(&bd, s, sorder + r0, r1 - r0, slocal, leaves, idx + b, e - b, order);
     r0 = r1;
   }
 #undef POLY_OF

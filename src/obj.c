@@ -40,9 +40,10 @@
  * "bottom"; two coincident surfaces would count that area twice). The material does not matter.
  * A face with the same positions but the opposite facing is kept: back to back, the two make a
  * two-sided panel, which one-sided surfaces can only model that way. Found through a hash table
- * of the sorted positions: O(total face vertices). A file without any surviving polygon is an error ("PATH: no polygons"). Emitters are
- * not required here (the solver checks). Numbers are read with strtod, so the caller must not
- * have switched LC_NUMERIC to a locale with a decimal comma.
+ * of the sorted positions: O(total face vertices). A file without any surviving polygon is an
+ * error ("PATH: no polygons"). Emitters are not required here (the solver checks). Numbers are
+ * read with strtod, so the caller must not have switched LC_NUMERIC to a locale with a decimal
+ * comma.
  */
 #include "hrad.h"
 

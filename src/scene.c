@@ -279,8 +279,10 @@ static void acam_raster(acam_buf *b, const acam_view *v, const hr_vec3 *q, int n
     double area = (sx[k[1]] - sx[k[0]]) * (sy[k[2]] - sy[k[0]]) -
                   (sx[k[2]] - sx[k[0]]) * (sy[k[1]] - sy[k[0]]);
     if (!(fabs(area) > 1e-12)) continue;
-    double x0 = fmin(sx[k[0]], fmin(sx[k[1]], sx[k[2]])), x1 = fmax(sx[k[0]], fmax(sx[k[1]], sx[k[2]]));
-    double y0 = fmin(sy[k[0]], fmin(sy[k[1]], sy[k[2]])), y1 = fmax(sy[k[0]], fmax(sy[k[1]], sy[k[2]]));
+    double x0 = fmin(sx[k[0]], fmin(sx[k[1]], sx[k[2]]));
+    double x1 = fmax(sx[k[0]], fmax(sx[k[1]], sx[k[2]]));
+    double y0 = fmin(sy[k[0]], fmin(sy[k[1]], sy[k[2]]));
+    double y1 = fmax(sy[k[0]], fmax(sy[k[1]], sy[k[2]]));
     int px0 = (int)fmax(0, floor(x0)), px1 = (int)fmin(ACAM_W - 1, ceil(x1));
     int py0 = (int)fmax(0, floor(y0)), py1 = (int)fmin(ACAM_H - 1, ceil(y1));
     for (int py = py0; py <= py1; py++)
@@ -387,10 +389,12 @@ void hr_scene_auto_camera(const hr_scene *s, hr_camera *cam) {
   double hup = zup ? ext.z : ext.y;
   double lo_up = zup ? lo.z : lo.y;
 
+  /* outside views fit the bounding sphere into a 50 degree field of view */
+  double dist = r / tan(25 * M_PI / 180) * 1.05;
+  /* fallback (no memory, or no usable candidate): the fixed diagonal */
+  hr_vec3 diag = zup ? v3(0.55, 1.0, 0.45) : v3(0.55, 0.45, 1.0);
+  hr_camera best = {v3_add(c, v3_scale(v3_norm(diag), dist)), c, up, 50};
   acam_buf *buf = malloc(sizeof *buf);
-  hr_camera best = {v3_add(c, v3_scale(v3_norm(v3(0.55, 0.45, 1.0)), r / tan(25 * M_PI / 180) * 1.05)),
-                    c, up, 50};
-  if (zup) best.eye = v3_add(c, v3_scale(v3_norm(v3(0.55, 1.0, 0.45)), r / tan(25 * M_PI / 180) * 1.05));
   if (!buf) {
     *cam = best;
     return;
@@ -400,7 +404,6 @@ void hr_scene_auto_camera(const hr_scene *s, hr_camera *cam) {
   /* outside candidates */
   const double dirs[8][2] = {{1, 0}, {0, 1}, {-1, 0}, {0, -1}, {1, 1}, {1, -1}, {-1, 1}, {-1, -1}};
   const double elev[2] = {10, 35};
-  double dist = r / tan(25 * M_PI / 180) * 1.05;
   for (int e = 0; e < 2; e++)
     for (int d = 0; d < 8; d++) {
       hr_vec3 hd = v3_norm(v3_add(v3_scale(h1, dirs[d][0]), v3_scale(h2, dirs[d][1])));

@@ -88,9 +88,12 @@ double hr_elem_rho_max(const hr_solver *s, const hr_elem *e);
 double hr_ff_unoccluded(const hr_solver *s, const hr_elem *r, const hr_elem *j);
 /* Visible fraction H between elements a and b with candidate list 'cand' (0 candidates: 1, no
  * rays; ncand < 0: no list, rays against the whole scene). Symmetric: H(a,b) == H(b,a) exactly.
- * Adds the number of rays cast to *rays. */
+ * Adds the number of rays cast to *rays. Only segments whose ends lie in front of the other
+ * element count. If 'fmc' is non-NULL it receives the ray-cast point-to-disk form factors
+ * (Wallace et al.) F(a <- b) and F(b <- a) over the same segments, for links whose centres face
+ * away (eq. (2) gives 0 there although parts of the elements face each other). */
 double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
-                        const int32_t *cand, int ncand, int64_t *rays);
+                        const int32_t *cand, int ncand, int64_t *rays, double fmc[2]);
 /* Counter-based hash of (seed, a, b, i): the only source of randomness. */
 uint64_t hr_hash4(uint64_t seed, uint64_t a, uint64_t b, uint64_t i);
 

@@ -199,15 +199,27 @@ static void invariance(void) {
   }
   printf("both inner-loop modes converge to the same answer\n");
   run_result rigid = run_room(0, 0);
-  double worst = 0;
-  for (int i = 0; i < 3 * np; i++) {
-    double e = fabs(rigid.b[i] - base.b[i]) / (fabs(base.b[i]) + 1e-3);
-    worst = e > worst ? e : worst;
-  }
-  printf("  relaxed: %d iterations, rigid: %d iterations, worst rel. difference %.2e\n",
-         base.st.iterations, rigid.st.iterations, worst);
+  /* The two modes refine along different paths, so they are two discretisations of the same
+   * answer: total power must agree closely, single small polygons within the per-polygon
+   * discretisation noise (a few percent at the default BF_low; see docs/design.md). */
+  hr_scene *rs = room();
+  double worst = 0, pw_relax = 0, pw_rigid = 0;
+  for (int p = 0; p < np; p++)
+    for (int c = 0; c < 3; c++) {
+      int i = 3 * p + c;
+      double e = fabs(rigid.b[i] - base.b[i]) / (fabs(base.b[i]) + 1e-3);
+      worst = e > worst ? e : worst;
+      pw_relax += base.b[i] * rs->poly_area[p];
+      pw_rigid += rigid.b[i] * rs->poly_area[p];
+    }
+  hr_scene_destroy(&rs);
+  double dpow = fabs(pw_rigid - pw_relax) / pw_relax;
+  printf("  relaxed: %d iterations, rigid: %d iterations; total power differs by %.2e, worst "
+         "polygon by %.2e\n",
+         base.st.iterations, rigid.st.iterations, dpow, worst);
   CHECK(base.st.converged && rigid.st.converged, "a mode did not converge");
-  CHECK(worst < 0.02, "relaxed and rigid differ by %.3e", worst);
+  CHECK(dpow < 0.005, "relaxed and rigid total power differ by %.3e", dpow);
+  CHECK(worst < 0.05, "relaxed and rigid differ by %.3e on a polygon", worst);
   free(rigid.b);
   free(base.b);
 }
