@@ -17,10 +17,12 @@
 #include "hrad.h"
 #include <stdint.h>
 
-/* A triangle mesh over all surfaces. Vertices belong to exactly one surface (they are never
- * shared across surfaces, whose normals and materials differ); within a surface, leaf corners
- * with equal lattice coordinates are one vertex. Triangles are counter-clockwise seen from the
- * front of their surface. Vertices of one surface are contiguous, surfaces in increasing order. */
+/* A triangle mesh over all surfaces. Vertices belong to exactly one input polygon: the surfaces
+ * one polygon was split into (a non-planar quad's two triangles, a fan) share the vertices along
+ * their common edges, so the polygon is one smooth region; different polygons, whose normals and
+ * materials differ, never share vertices. Within a surface, leaf corners with equal lattice
+ * coordinates are one vertex. Triangles are counter-clockwise seen from the front of their
+ * surface. */
 typedef struct hr_mesh {
   int64_t nverts, ntris;
   float *pos;        /* 3*nverts, world coordinates */
@@ -34,7 +36,8 @@ typedef struct hr_mesh {
 } hr_mesh;
 
 /* Builds the smooth mesh from 'n' leaves (in any order) of scene 's'.
- *  - Per surface, vertices are keyed by lattice coordinates; positions come from the surface's
+ *  - Per input polygon, vertices are keyed by lattice coordinates within a surface and matched
+ *    exactly along edges shared by the polygon's surfaces; positions come from the surface's
  *    parametrisation (bilinear for quads, barycentric for triangles, see hrad.h).
  *  - A vertex's value is the area-weighted mean of B over the leaves having it as a corner.
  *  - T-vertices (a corner of smaller leaves lying inside an edge of a larger leaf) are found by
