@@ -47,6 +47,8 @@ static void die_usage(const char *fmt, ...) {
 }
 
 static void usage(void) {
+  hr_options d;
+  hr_options_default(&d);
   printf(
       "Usage: hrad [OPTIONS] [SCENE]\n"
       "Hierarchical radiosity (Bohn & Garmann, WSCG'95). SCENE is a built-in name (room, floor,\n"
@@ -80,7 +82,8 @@ static void usage(void) {
       "  --max-iters N        stop after N iterations (default %d)\n"
       "  --max-pairs N        refuse scenes with more surface pairs than N (default %g)\n"
       "  -h, --help           this help\n",
-      2e-4, 0.05, 4.0, 1e-4, 1e-4, 2e-3, 16, 1ULL, 1000, 5e7);
+      d.bf_low, d.bf_start, d.bf_factor, d.area_min, d.b_eps, d.b_max, d.rays,
+      (unsigned long long)d.seed, d.max_iters, d.max_links);
 }
 
 static double parse_num(const char *opt, const char *v) {
