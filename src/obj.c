@@ -46,6 +46,7 @@
  * comma.
  */
 #include "hrad.h"
+#include "vec.h"
 
 #include <errno.h>
 #include <limits.h>
@@ -499,17 +500,6 @@ static uint64_t mix64(uint64_t x) {
   return x;
 }
 
-static hr_vec3 newell(const hr_vec3 *v, size_t n) {
-  hr_vec3 r = {0, 0, 0};
-  for (size_t i = 0; i < n; i++) {
-    hr_vec3 a = v[i], b = v[(i + 1) % n];
-    r.x += (a.y - b.y) * (a.z + b.z);
-    r.y += (a.z - b.z) * (a.x + b.x);
-    r.z += (a.x - b.x) * (a.y + b.y);
-  }
-  return r;
-}
-
 /* Sorts and de-duplicates the current face's 'n' positions into c->sorted ('*m' of them) and
  * hashes them; 0 when out of memory. */
 static int face_key(obj_ctx *c, size_t n, size_t *m, uint64_t *hash) {
@@ -631,7 +621,7 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
   uint64_t hash;
   if (!face_key(c, n, &m, &hash))
     return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
-  hr_vec3 nrm = newell(c->face, n);
+  hr_vec3 nrm = v3_newell(c->face, (int)n);
   long dup = find_duplicate(c, m, hash, nrm);
   if (dup > 0) {
     hr_log_warn(c->log, "%s:%ld: duplicate of the polygon on line %ld; skipped", c->path, line,

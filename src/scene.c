@@ -95,18 +95,6 @@ hr_status hr_scene_set_emit(hr_scene *s, const char *name, const double rgb[3], 
   return HR_OK;
 }
 
-/* Newell normal (not normalised): robust for any simple polygon. */
-static hr_vec3 newell(const hr_vec3 *v, int n) {
-  hr_vec3 r = {0, 0, 0};
-  for (int i = 0; i < n; i++) {
-    hr_vec3 a = v[i], b = v[(i + 1) % n];
-    r.x += (a.y - b.y) * (a.z + b.z);
-    r.y += (a.z - b.z) * (a.x + b.x);
-    r.z += (a.x - b.x) * (a.y + b.y);
-  }
-  return r;
-}
-
 /* Relative tolerances: a vertex off the plane by more than PLANAR_TOL times the polygon's size
  * makes it non-planar; an area below AREA_TOL times size^2 is degenerate. */
 #define PLANAR_TOL 1e-6
@@ -121,7 +109,7 @@ static double poly_size(const hr_vec3 *v, int n) {
 
 static hr_status push_surface(hr_scene *s, const hr_vec3 *v, int n, int material, int poly,
                               int *added) {
-  hr_vec3 nn = newell(v, n);
+  hr_vec3 nn = v3_newell(v, n);
   double len = v3_len(nn);
   double size = poly_size(v, n);
   if (!(len * 0.5 > AREA_TOL * size * size) || size == 0) return HR_OK; /* degenerate piece */
@@ -162,7 +150,7 @@ hr_status hr_scene_add_polygon(hr_scene *s, const hr_vec3 *v, int n, int materia
   if (n < 3 || material < 0 || material >= s->nmats) return HR_ERR_INVALID;
   for (int i = 0; i < n; i++)
     if (!isfinite(v[i].x) || !isfinite(v[i].y) || !isfinite(v[i].z)) return HR_ERR_INVALID;
-  hr_vec3 nn = newell(v, n);
+  hr_vec3 nn = v3_newell(v, n);
   double len = v3_len(nn), size = poly_size(v, n);
   if (size == 0 || !(0.5 * len > AREA_TOL * size * size)) return HR_OK;
   hr_vec3 nrm = v3_scale(nn, 1.0 / len);
@@ -180,8 +168,8 @@ hr_status hr_scene_add_polygon(hr_scene *s, const hr_vec3 *v, int n, int materia
      * of two valid diagonals take the shorter (better-shaped triangles). */
     hr_vec3 a[3] = {v[0], v[1], v[2]}, b[3] = {v[0], v[2], v[3]};
     hr_vec3 c[3] = {v[1], v[2], v[3]}, d[3] = {v[1], v[3], v[0]};
-    int ok02 = v3_dot(newell(a, 3), nrm) > 0 && v3_dot(newell(b, 3), nrm) > 0;
-    int ok13 = v3_dot(newell(c, 3), nrm) > 0 && v3_dot(newell(d, 3), nrm) > 0;
+    int ok02 = v3_dot(v3_newell(a, 3), nrm) > 0 && v3_dot(v3_newell(b, 3), nrm) > 0;
+    int ok13 = v3_dot(v3_newell(c, 3), nrm) > 0 && v3_dot(v3_newell(d, 3), nrm) > 0;
     int use13 = ok13 && (!ok02 || v3_len(v3_sub(v[1], v[3])) < v3_len(v3_sub(v[0], v[2])));
     if (use13) {
       st = push_surface(s, c, 3, material, poly, &added);

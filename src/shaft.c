@@ -104,23 +104,11 @@ static void add_plane_if_bounding(shaft_t *sh, hr_vec3 n, hr_vec3 at, const hr_v
   if (mn >= -tol) push_plane(sh, v3_scale(n, -1), -d + (mn < 0 ? -mn : 0) + tol);
 }
 
-/* Newell normal of a polygon (unnormalised). */
-static hr_vec3 poly_normal(const hr_vec3 *v, int n) {
-  hr_vec3 r = {0, 0, 0};
-  for (int i = 0; i < n; i++) {
-    hr_vec3 a = v[i], b = v[(i + 1) % n];
-    r.x += (a.y - b.y) * (a.z + b.z);
-    r.y += (a.z - b.z) * (a.x + b.x);
-    r.z += (a.x - b.x) * (a.y + b.y);
-  }
-  return r;
-}
-
 /* Adds the front half-space of polygon 'v' (always: by definition of the shaft) and its back
  * half-space when every point lies behind or on its plane (coplanar or back-to-back pairs). */
 static int add_own_plane(shaft_t *sh, const hr_vec3 *v, int nv, const hr_vec3 *pts, int npts,
                          double tol) {
-  hr_vec3 n = poly_normal(v, nv);
+  hr_vec3 n = v3_newell(v, nv);
   double len = v3_len(n);
   if (!(len > 0) || !isfinite(len)) return 1;
   n = v3_scale(n, 1.0 / len);
@@ -184,7 +172,7 @@ static void shaft_build(shaft_t *sh, const hr_vec3 *pa, int na, const hr_vec3 *p
   for (int side = 0; side < 2; side++) {
     const hr_vec3 *p = side ? pb : pa;
     int np = side ? nb : na;
-    hr_vec3 nrm = poly_normal(p, np);
+    hr_vec3 nrm = v3_newell(p, np);
     for (int i = 0; i < np; i++) {
       hr_vec3 a = p[i], e = v3_sub(p[(i + 1) % np], a);
       add_plane_if_bounding(sh, v3_cross(e, nrm), a, pts, npts, tol);

@@ -7,6 +7,19 @@
 
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
+/* Newell normal of a polygon (not normalised; its length is twice the area): robust for any
+ * simple polygon, planar or slightly not. */
+static inline hr_vec3 v3_newell(const hr_vec3 *v, int n) {
+  hr_vec3 r = {0, 0, 0};
+  for (int i = 0; i < n; i++) {
+    hr_vec3 a = v[i], b = v[(i + 1) % n];
+    r.x += (a.y - b.y) * (a.z + b.z);
+    r.y += (a.z - b.z) * (a.x + b.x);
+    r.z += (a.x - b.x) * (a.y + b.y);
+  }
+  return r;
+}
+
 #endif
 
 static inline hr_vec3 v3(double x, double y, double z) { return (hr_vec3){x, y, z}; }
@@ -30,6 +43,19 @@ static inline hr_vec3 v3_min(hr_vec3 a, hr_vec3 b) {
 }
 static inline hr_vec3 v3_max(hr_vec3 a, hr_vec3 b) {
   return v3(a.x > b.x ? a.x : b.x, a.y > b.y ? a.y : b.y, a.z > b.z ? a.z : b.z);
+}
+
+/* Newell normal of a polygon (not normalised; its length is twice the area): robust for any
+ * simple polygon, planar or slightly not. */
+static inline hr_vec3 v3_newell(const hr_vec3 *v, int n) {
+  hr_vec3 r = {0, 0, 0};
+  for (int i = 0; i < n; i++) {
+    hr_vec3 a = v[i], b = v[(i + 1) % n];
+    r.x += (a.y - b.y) * (a.z + b.z);
+    r.y += (a.z - b.z) * (a.x + b.x);
+    r.z += (a.x - b.x) * (a.y + b.y);
+  }
+  return r;
 }
 
 #endif
