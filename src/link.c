@@ -62,6 +62,7 @@ static int elem_in_front(const hr_solver *s, const hr_elem *a, const hr_elem *b)
 static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64_t *rays) {
   const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
   double f = hr_ff_unoccluded(s, r, j), h;
+  l->Fu = (float)f;
   if (f > 0) {
     h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, rays, NULL);
     f *= h;
@@ -88,8 +89,7 @@ static double link_bf(const hr_solver *s, const hr_link *l) {
     /* Partly visible: H rests on k rays and varies across the elements (a shadow boundary
      * crosses them); refine as if unoccluded, so that visibility is resolved by refinement
      * instead of by the noise of one coarse estimate. */
-    double fu = hr_ff_unoccluded(s, r, j);
-    f = fu > f ? fu : f;
+    f = l->Fu > f ? l->Fu : f;
   }
   if (f == 0 && l->H > 0) {
     double r2 = v3_dot(v3_sub(j->c, r->c), v3_sub(j->c, r->c));
@@ -159,10 +159,11 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
       /* Eq. (2) where the centres face each other, else the ray-cast estimate (link_eval). */
       double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
       double fji = hr_ff_unoccluded(s, &s->el[j], &s->el[i]);
-      fij = fij > 0 ? fij * h : fmc[0];
-      fji = fji > 0 ? fji * h : fmc[1];
-      rw->links[rw->nlinks++] = (hr_link){i, j, (float)fij, (float)h, 0, NO_LIST};
-      rw->links[rw->nlinks++] = (hr_link){j, i, (float)fji, (float)h, 0, NO_LIST};
+      double Fij = fij > 0 ? fij * h : fmc[0], Fji = fji > 0 ? fji * h : fmc[1];
+      hr_link lij = {i, j, (float)Fij, (float)h, (float)fij, 0, NO_LIST};
+      hr_link lji = {j, i, (float)Fji, (float)h, (float)fji, 0, NO_LIST};
+      rw->links[rw->nlinks++] = lij;
+      rw->links[rw->nlinks++] = lji;
     }
   }
   int64_t nl = 0;

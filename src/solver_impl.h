@@ -38,6 +38,7 @@ typedef struct hr_link {
   int32_t r, s;       /* receiver and source element idx */
   float F;            /* form factor of eq. (2) times H */
   float H;            /* visible fraction */
+  float Fu;           /* eq. (2) at the centres, unoccluded (for the refinement oracle) */
   uint32_t cand_off;  /* candidate blockers: pool[cand_off .. cand_off+ncand) */
   int32_t ncand;
 } hr_link;
