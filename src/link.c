@@ -195,9 +195,6 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
 
 enum { KEEP = 0, SPLIT_R = 1, SPLIT_S = 2 };
 
-/* Candidate lists up to this long are inherited unfiltered by child links. */
-#define FILTER_MIN 0
-
 /* Element polygon (world corners) for shaft filtering. */
 static int elem_poly(const hr_solver *s, const hr_elem *e, hr_vec3 *p) {
   int n = s->scene->surfs[e->surf].nverts;
@@ -374,17 +371,12 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
         cl->cand_off = (uint32_t)off;
         hr_vec3 pa[4], pb[4];
         int na = elem_poly(s, &s->el[cl->r], pa), nb = elem_poly(s, &s->el[cl->s], pb);
-        /* The parent's list is a valid (conservative) list for the child; shrinking it costs
-         * a shaft construction, which only pays off for longer lists. */
-        if (pl->ncand <= FILTER_MIN) {
-          cl->ncand = pl->ncand;
-          if (pl->ncand > 0)
-            memcpy(s->pool + off, s->pool + pl->cand_off, (size_t)pl->ncand * sizeof(int32_t));
-        } else {
-          cl->ncand = hr_shaft_filter(s->scene, pa, na, s->el[cl->r].surf, pb, nb,
-                                      s->el[cl->s].surf, s->pool + pl->cand_off, pl->ncand,
-                                      s->pool + off);
-        }
+        /* Children shrink the parent's list to their own shaft. Always worth it (measured):
+         * an emptied list means H = 1 with no rays. */
+        cl->ncand = pl->ncand == 0 ? 0
+                                   : hr_shaft_filter(s->scene, pa, na, s->el[cl->r].surf, pb, nb,
+                                                     s->el[cl->s].surf, s->pool + pl->cand_off,
+                                                     pl->ncand, s->pool + off);
         link_eval(s, s->pool, cl, &rays);
       }
     }
