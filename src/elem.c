@@ -49,6 +49,9 @@ static int reserve(hr_solver *s, int64_t need) {
   double(*G)[3] = realloc(s->G, (size_t)nc * sizeof *G);
   if (!G) return 0;
   s->G = G;
+  double(*rho)[3] = realloc(s->rho, (size_t)nc * sizeof *rho);
+  if (!rho) return 0;
+  s->rho = rho;
   s->cap_el = nc;
   return 1;
 }
@@ -74,9 +77,11 @@ hr_status hr_elem_init(hr_solver *s) {
     }
     elem_geometry(sc, e);
     const double *E = sc->mats[sc->surfs[i].material].emit;
+    const double *R = sc->mats[sc->surfs[i].material].rho;
     for (int c = 0; c < 3; c++) {
       s->B[i][c] = E[c];
       s->G[i][c] = 0;
+      s->rho[i][c] = R[c];
     }
   }
   s->nel = sc->nsurfs;
@@ -138,24 +143,12 @@ hr_status hr_elem_subdivide(hr_solver *s, int32_t idx) {
     for (int c = 0; c < 3; c++) {
       s->B[first + k][c] = s->B[idx][c];
       s->G[first + k][c] = 0;
+      s->rho[first + k][c] = s->rho[idx][c];
     }
   }
   p->child = first;
   s->nel += 4;
   return HR_OK;
-}
-
-hr_vec3 hr_elem_point(const hr_solver *s, const hr_elem *e, double u, double v) {
-  if (s->scene->surfs[e->surf].nverts == 4) {
-    hr_vec3 a = v3_lerp(e->p[0], e->p[1], u), b = v3_lerp(e->p[3], e->p[2], u);
-    return v3_lerp(a, b, v);
-  }
-  if (u + v > 1) {
-    u = 1 - u;
-    v = 1 - v;
-  }
-  return v3_add(e->p[0], v3_add(v3_scale(v3_sub(e->p[1], e->p[0]), u),
-                                v3_scale(v3_sub(e->p[2], e->p[0]), v)));
 }
 
 double hr_elem_rho_max(const hr_solver *s, const hr_elem *e) {

@@ -38,6 +38,20 @@ double hr_ff_unoccluded(const hr_solver *s, const hr_elem *r, const hr_elem *j) 
   return ci * cj * j->area / (M_PI * r2 + j->area);
 }
 
+/* Point on element 'e' at parameters (u, v) in [0,1)^2 (triangles fold the square). */
+static inline hr_vec3 elem_point(const hr_elem *e, int nverts, double u, double v) {
+  if (nverts == 4) {
+    hr_vec3 a = v3_lerp(e->p[0], e->p[1], u), b = v3_lerp(e->p[3], e->p[2], u);
+    return v3_lerp(a, b, v);
+  }
+  if (u + v > 1) {
+    u = 1 - u;
+    v = 1 - v;
+  }
+  return v3_add(e->p[0], v3_add(v3_scale(v3_sub(e->p[1], e->p[0]), u),
+                                v3_scale(v3_sub(e->p[2], e->p[0]), v)));
+}
+
 #define CAND_BRUTE_MAX 16 /* lists this short are tested directly (measured 45-60 Mrays/s) */
 #define CHUNK 64
 
@@ -55,8 +69,10 @@ double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
    * from b, kba for b receiving from a. */
   double kab = 0, kba = 0;
   int k = s->opt.rays;
+  const double invk = 1.0 / k; /* exact for the default k = 16 */
   int visible = 0, counted = 0;
   const hr_vec3 na = s->scene->surfs[a->surf].normal, nb = s->scene->surfs[b->surf].normal;
+  const int nva = s->scene->surfs[a->surf].nverts, nvb = s->scene->surfs[b->surf].nverts;
   /* One hash of (seed, pair) keys the pair; each sample's two words are one mix away. */
   uint64_t key = hr_hash4(s->opt.seed, a->gid, b->gid, 0);
   float org[CHUNK * 3], dst[CHUNK * 3];
@@ -72,9 +88,9 @@ double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
       uint64_t h2 = mix64(key + (uint64_t)(2 * i + 2) * UINT64_C(0x9e3779b97f4a7c15));
       /* Stratified in the first parameter of each end, uniform in the second. */
       int si = i % k;
-      double ua = (si + unit(h1)) / k, va = unit(h1 << 26 | h1 >> 38);
-      double ub = unit(h2), vb = ((si * 7 + 3) % k + unit(h2 << 26 | h2 >> 38)) / k;
-      hr_vec3 p = hr_elem_point(s, a, ua, va), t = hr_elem_point(s, b, ub, vb);
+      double ua = (si + unit(h1)) * invk, va = unit(h1 << 26 | h1 >> 38);
+      double ub = unit(h2), vb = ((si * 7 + 3) % k + unit(h2 << 26 | h2 >> 38)) * invk;
+      hr_vec3 p = elem_point(a, nva, ua, va), t = elem_point(b, nvb, ub, vb);
       /* Only the parts of the two elements in front of each other exchange light: a sample
        * with an end behind the other element's plane is not counted (when an element straddles
        * the other's plane, such segments run through whatever solid the straddled surface

@@ -82,8 +82,6 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
  * parts of them may still face each other, the cosines are bounded by 1 so that such a link
  * still refines instead of silently dropping its energy. */
 static double link_bf(const hr_solver *s, const hr_link *l) {
-  const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
-  const double *rho = s->scene->mats[s->scene->surfs[r->surf].material].rho;
   double f = l->F;
   if (l->H > 0 && l->H < 1) {
     /* Partly visible: H rests on k rays and varies across the elements (a shadow boundary
@@ -92,12 +90,16 @@ static double link_bf(const hr_solver *s, const hr_link *l) {
     f = l->Fu > f ? l->Fu : f;
   }
   if (f == 0 && l->H > 0) {
+    const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
     double r2 = v3_dot(v3_sub(j->c, r->c), v3_sub(j->c, r->c));
     f = j->area / (M_PI * r2 + j->area);
   }
+  /* Only the link and the per-element arrays rho and B are touched here: this runs for every
+   * link in every iteration. */
+  const double *rho = s->rho[l->r], *b = s->B[l->s];
   double m = 0;
   for (int c = 0; c < 3; c++) {
-    double e = rho[c] * s->B[l->s][c];
+    double e = rho[c] * b[c];
     m = e > m ? e : m;
   }
   return m * f / s->emax;
@@ -143,8 +145,13 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
        * hidden from each other, and most initial links are never refined, so a candidate list
        * is built only when a link first splits (see hr_link_refine). A pair all of whose k
        * segments are blocked is taken as mutually invisible. */
+      /* Eq. (2) where the centres face each other, else the ray-cast estimate (link_eval),
+       * which is only computed when needed. */
+      double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
+      double fji = hr_ff_unoccluded(s, &s->el[j], &s->el[i]);
       double fmc[2];
-      double h = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, &rw->rays, fmc);
+      double h = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, &rw->rays,
+                                  fij > 0 && fji > 0 ? NULL : fmc);
       if (h == 0) continue;
       if (rw->nlinks + 2 > rw->cap) {
         int nc = rw->cap ? rw->cap * 2 : 16;
@@ -156,9 +163,6 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
         rw->links = l;
         rw->cap = nc;
       }
-      /* Eq. (2) where the centres face each other, else the ray-cast estimate (link_eval). */
-      double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
-      double fji = hr_ff_unoccluded(s, &s->el[j], &s->el[i]);
       double Fij = fij > 0 ? fij * h : fmc[0], Fji = fji > 0 ? fji * h : fmc[1];
       hr_link lij = {i, j, (float)Fij, (float)h, (float)fij, 0, NO_LIST};
       hr_link lji = {j, i, (float)Fji, (float)h, (float)fji, 0, NO_LIST};
@@ -263,11 +267,19 @@ static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uin
 
 hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
   *nnew = 0;
-  /* Most iterations split nothing: find out first, without copying the graph. */
+  /* Most iterations split nothing: decide for every link first, without copying the graph. */
+  uint8_t *dec = malloc((size_t)(s->nlinks > 0 ? s->nlinks : 1));
+  if (!dec) return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
   int64_t nsplit0 = 0;
 #pragma omp parallel for schedule(static) reduction(+ : nsplit0) if (s->nlinks > PAR_MIN)
-  for (int64_t i = 0; i < s->nlinks; i++) nsplit0 += decide(s, &s->links[i], bf_e) != KEEP;
-  if (nsplit0 == 0) return HR_OK;
+  for (int64_t i = 0; i < s->nlinks; i++) {
+    dec[i] = decide(s, &s->links[i], bf_e);
+    nsplit0 += dec[i] != KEEP;
+  }
+  if (nsplit0 == 0) {
+    free(dec);
+    return HR_OK;
+  }
   /* Few splits (the usual case late in a level): refine only those links, leave the others in
    * place and append the results; the graph is compacted and fully sorted once dead and extra
    * links make up a quarter of it. */
@@ -276,11 +288,15 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
   int64_t ncur;
   if (incremental) {
     cur = malloc((size_t)nsplit0 * sizeof *cur);
-    if (!cur) return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
+    if (!cur) {
+      free(dec);
+      return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
+    }
     ncur = 0;
     for (int64_t i = 0; i < s->nlinks; i++) {
+      if (dec[i] == KEEP) continue;
       hr_link *l = &s->links[i];
-      if (decide(s, l, bf_e) == KEEP) continue;
+      dec[ncur] = dec[i]; /* ncur <= i */
       cur[ncur++] = *l;
       l->H = -1; /* dead */
       l->F = 0;
@@ -294,18 +310,22 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     s->cap_links = 0;
   }
   int64_t nkeep = 0, capkeep = 0;
-  uint8_t *dec = NULL;
   int64_t *slot = NULL;
   uint8_t *mark = NULL;
   int64_t capmark = 0;
   hr_status st = HR_OK;
   int64_t rays = 0;
-  while (ncur > 0) {
-    dec = realloc(dec, (size_t)ncur);
-    slot = realloc(slot, (size_t)ncur * sizeof *slot);
-    if (!dec || !slot) goto nomem;
+  /* dec[0, ncur) holds the decisions of the first round already. */
+  for (int round = 0; ncur > 0; round++) {
+    if (round > 0) {
+      uint8_t *d2 = realloc(dec, (size_t)ncur);
+      if (!d2) goto nomem;
+      dec = d2;
 #pragma omp parallel for schedule(static) if (ncur > PAR_MIN)
-    for (int64_t i = 0; i < ncur; i++) dec[i] = decide(s, &cur[i], bf_e);
+      for (int64_t i = 0; i < ncur; i++) dec[i] = decide(s, &cur[i], bf_e);
+    }
+    slot = realloc(slot, (size_t)ncur * sizeof *slot);
+    if (!slot) goto nomem;
     if (build_lists(s, cur, ncur, dec) != HR_OK) goto nomem;
     /* Subdivide the marked elements in link order (deterministic element indices). */
     if (capmark < s->nel) {

@@ -82,17 +82,47 @@ static void push_plane(shaft_t *sh, hr_vec3 n, double d) {
   sh->nx[k] = n.x, sh->ny[k] = n.y, sh->nz[k] = n.z, sh->d[k] = d;
 }
 
-static void add_plane_if_bounding(shaft_t *sh, hr_vec3 n, hr_vec3 at, const hr_vec3 *pts, int npts,
+/* The (up to 8) vertices of both polygons in structure-of-arrays form, padded to 8 by repeating
+ * the last one (repeats change no minimum or maximum). */
+typedef struct {
+  double x[8], y[8], z[8];
+} pts8;
+
+/* Smallest and largest of n.p - d over the points. */
+static inline void pts8_range(const pts8 *p, hr_vec3 n, double d, double *mn, double *mx) {
+#ifdef __AVX2__
+  const __m256d vx = _mm256_set1_pd(n.x), vy = _mm256_set1_pd(n.y), vz = _mm256_set1_pd(n.z),
+                vd = _mm256_set1_pd(d);
+  __m256d s0 = _mm256_add_pd(_mm256_mul_pd(vx, _mm256_loadu_pd(p->x)),
+                             _mm256_mul_pd(vy, _mm256_loadu_pd(p->y)));
+  __m256d s1 = _mm256_add_pd(_mm256_mul_pd(vx, _mm256_loadu_pd(p->x + 4)),
+                             _mm256_mul_pd(vy, _mm256_loadu_pd(p->y + 4)));
+  s0 = _mm256_sub_pd(_mm256_add_pd(s0, _mm256_mul_pd(vz, _mm256_loadu_pd(p->z))), vd);
+  s1 = _mm256_sub_pd(_mm256_add_pd(s1, _mm256_mul_pd(vz, _mm256_loadu_pd(p->z + 4))), vd);
+  __m256d lo = _mm256_min_pd(s0, s1), hi = _mm256_max_pd(s0, s1);
+  __m128d lo2 = _mm_min_pd(_mm256_castpd256_pd128(lo), _mm256_extractf128_pd(lo, 1));
+  __m128d hi2 = _mm_max_pd(_mm256_castpd256_pd128(hi), _mm256_extractf128_pd(hi, 1));
+  *mn = _mm_cvtsd_f64(_mm_min_sd(lo2, _mm_unpackhi_pd(lo2, lo2)));
+  *mx = _mm_cvtsd_f64(_mm_max_sd(hi2, _mm_unpackhi_pd(hi2, hi2)));
+#else
+  double a = INFINITY, b = -INFINITY;
+  for (int i = 0; i < 8; i++) {
+    double s = n.x * p->x[i] + n.y * p->y[i] + n.z * p->z[i] - d;
+    a = s < a ? s : a;
+    b = s > b ? s : b;
+  }
+  *mn = a;
+  *mx = b;
+#endif
+}
+
+static void add_plane_if_bounding(shaft_t *sh, hr_vec3 n, hr_vec3 at, const pts8 *pts,
                                   double tol) {
   double len2 = v3_dot(n, n);
   if (!(len2 > 0) || !isfinite(len2)) return;
   /* Signed distances times |n| first (no square root for the many rejected planes). */
-  double d = v3_dot(n, at), mn = INFINITY, mx = -INFINITY;
-  for (int i = 0; i < npts; i++) {
-    double s = v3_dot(n, pts[i]) - d;
-    mn = s < mn ? s : mn;
-    mx = s > mx ? s : mx;
-  }
+  double d = v3_dot(n, at), mn, mx;
+  pts8_range(pts, n, d, &mn, &mx);
   double len = sqrt(len2), tl = tol * len;
   if (!(mx <= tl) && !(mn >= -tl)) return;
   double inv = 1.0 / len;
@@ -106,8 +136,7 @@ static void add_plane_if_bounding(shaft_t *sh, hr_vec3 n, hr_vec3 at, const hr_v
 
 /* Adds the front half-space of polygon 'v' (always: by definition of the shaft) and its back
  * half-space when every point lies behind or on its plane (coplanar or back-to-back pairs). */
-static int add_own_plane(shaft_t *sh, const hr_vec3 *v, int nv, const hr_vec3 *pts, int npts,
-                         double tol) {
+static int add_own_plane(shaft_t *sh, const hr_vec3 *v, int nv, const pts8 *pts, double tol) {
   hr_vec3 n = v3_newell(v, nv);
   double len = v3_len(n);
   if (!(len > 0) || !isfinite(len)) return 1;
@@ -115,16 +144,14 @@ static int add_own_plane(shaft_t *sh, const hr_vec3 *v, int nv, const hr_vec3 *p
   double d = 0;
   for (int i = 0; i < nv; i++) d += v3_dot(n, v[i]);
   d /= nv;
-  double mx = -INFINITY, pmn = INFINITY, pmx = -INFINITY;
+  double mx, pmn = INFINITY, pmx = -INFINITY;
   for (int i = 0; i < nv; i++) {
     double s = v3_dot(n, v[i]) - d;
     pmn = s < pmn ? s : pmn;
     pmx = s > pmx ? s : pmx;
   }
-  for (int i = 0; i < npts; i++) {
-    double s = v3_dot(n, pts[i]) - d;
-    mx = s > mx ? s : mx;
-  }
+  double mn_unused;
+  pts8_range(pts, n, d, &mn_unused, &mx);
   push_plane(sh, v3_scale(n, -1), -(d + pmn) + tol); /* front: n.x >= d + pmn - tol */
   if (mx <= (pmx > 0 ? pmx : 0) + tol) {
     push_plane(sh, n, d + (mx > 0 ? mx : 0) + tol); /* back */
@@ -156,8 +183,13 @@ static void shaft_build(shaft_t *sh, const hr_vec3 *pa, int na, const hr_vec3 *p
   sh->lo[0] = lo.x - tol, sh->lo[1] = lo.y - tol, sh->lo[2] = lo.z - tol;
   sh->hi[0] = hi.x + tol, sh->hi[1] = hi.y + tol, sh->hi[2] = hi.z + tol;
   /* 'flat': all points on or behind a polygon's plane (coplanar or back-to-back pair). */
-  int flat = add_own_plane(sh, pa, na, pts, npts, tol);
-  flat |= add_own_plane(sh, pb, nb, pts, npts, tol);
+  pts8 p8;
+  for (int i = 0; i < 8; i++) {
+    hr_vec3 q = pts[i < npts ? i : npts - 1];
+    p8.x[i] = q.x, p8.y[i] = q.y, p8.z[i] = q.z;
+  }
+  int flat = add_own_plane(sh, pa, na, &p8, tol);
+  flat |= add_own_plane(sh, pb, nb, &p8, tol);
   /* Hull faces through an edge of one polygon and a vertex of the other. */
   for (int side = 0; side < 2; side++) {
     const hr_vec3 *p = side ? pb : pa, *q = side ? pa : pb;
@@ -165,7 +197,7 @@ static void shaft_build(shaft_t *sh, const hr_vec3 *pa, int na, const hr_vec3 *p
     for (int i = 0; i < np; i++) {
       hr_vec3 a = p[i], e = v3_sub(p[(i + 1) % np], a);
       for (int j = 0; j < nq; j++)
-        add_plane_if_bounding(sh, v3_cross(e, v3_sub(q[j], a)), a, pts, npts, tol);
+        add_plane_if_bounding(sh, v3_cross(e, v3_sub(q[j], a)), a, &p8, tol);
     }
   }
   /* An edge and its polygon's normal: the hull's sides when both polygons are coplanar. */
@@ -175,7 +207,7 @@ static void shaft_build(shaft_t *sh, const hr_vec3 *pa, int na, const hr_vec3 *p
     hr_vec3 nrm = v3_newell(p, np);
     for (int i = 0; i < np; i++) {
       hr_vec3 a = p[i], e = v3_sub(p[(i + 1) % np], a);
-      add_plane_if_bounding(sh, v3_cross(e, nrm), a, pts, npts, tol);
+      add_plane_if_bounding(sh, v3_cross(e, nrm), a, &p8, tol);
     }
   }
   const double slack = 1e-9 * mag;

@@ -94,6 +94,7 @@ void hr_solver_destroy(hr_solver **ps) {
   free(s->el);
   free(s->B);
   free(s->G);
+  free(s->rho);
   free(s->links);
   free(s->pool);
   free(s->rstart);

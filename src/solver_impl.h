@@ -56,6 +56,7 @@ struct hr_solver {
   int64_t nel, cap_el;
   double (*B)[3];     /* radiosity per element */
   double (*G)[3];     /* gathered (irradiance-like, before rho) per element */
+  double (*rho)[3];   /* reflectance per element (its surface's), beside B for the oracle */
   /* Links. [0, nsorted) are grouped by receiver: rstart[idx]..rstart[idx+1] (rstart has
    * nrstart+1 entries; elements created since have none there). Links refined away in an
    * incremental pass stay in place, dead (H < 0, F = 0), until the next full sort; their
@@ -79,8 +80,6 @@ struct hr_solver {
 /* elem.c */
 hr_status hr_elem_init(hr_solver *s);                  /* one root per surface, idx == surface */
 hr_status hr_elem_subdivide(hr_solver *s, int32_t idx); /* creates 4 children if a leaf */
-/* Point on element 'e' at parameters (u, v) in [0,1)^2 (triangles fold the square). */
-hr_vec3 hr_elem_point(const hr_solver *s, const hr_elem *e, double u, double v);
 double hr_elem_rho_max(const hr_solver *s, const hr_elem *e);
 
 /* ff.c */
