@@ -73,6 +73,14 @@ double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
   int visible = 0, counted = 0;
   const hr_vec3 na = s->scene->surfs[a->surf].normal, nb = s->scene->surfs[b->surf].normal;
   const int nva = s->scene->surfs[a->surf].nverts, nvb = s->scene->surfs[b->surf].nverts;
+  /* Segments cast with Embree start and end a few float ulps in front of their elements (s->lift
+   * along each normal; a sample counts only when each end is in front of the other element, so
+   * the segment leaves both planes on their front sides). After rounding to float, the segment
+   * then crosses neither surface's plane between its ends and cannot hit either surface, so no
+   * per-hit filter is needed to skip them. The exact candidate-list test works on the exact
+   * points and skips the two surfaces by id. */
+  const int embree = ncand < 0 || ncand > CAND_BRUTE_MAX;
+  const hr_vec3 la = v3_scale(na, s->lift), lb = v3_scale(nb, s->lift);
   /* One hash of (seed, pair) keys the pair; each sample's two words are one mix away. */
   uint64_t key = hr_hash4(s->opt.seed, a->gid, b->gid, 0);
   float org[CHUNK * 3], dst[CHUNK * 3];
@@ -108,6 +116,10 @@ double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
           wab[q] = wba[q] = 0;
         }
       }
+      if (embree) {
+        p = v3_add(p, la);
+        t = v3_add(t, lb);
+      }
       org[3 * q] = (float)p.x;
       org[3 * q + 1] = (float)p.y;
       org[3 * q + 2] = (float)p.z;
@@ -118,8 +130,8 @@ double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
     if (n == 0) continue;
     if (ncand == 0)
       memset(vis, 1, (size_t)n);
-    else if (ncand < 0 || ncand > CAND_BRUTE_MAX)
-      hr_vis_segments(s->vis, n, org, dst, a->surf, b->surf, vis);
+    else if (embree)
+      hr_vis_segments(s->vis, n, org, dst, -1, -1, vis);
     else
       hr_vis_segments_cand(s->scene, cand, ncand, n, org, dst, a->surf, b->surf, vis);
     for (int q = 0; q < n; q++) {

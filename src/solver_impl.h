@@ -51,6 +51,7 @@ struct hr_solver {
   double emax;        /* largest emitted radiosity: the unit of BF_e and B_e */
   double area_total;
   double area_min;    /* A_e in scene units */
+  double lift;        /* offset of ray ends off their surfaces, scene units */
   /* elements */
   hr_elem *el;
   int64_t nel, cap_el;
