@@ -148,6 +148,7 @@ typedef struct hr_options {
   int relax;          /* section 2.2.4 relaxed inner loop on/off */
   int relax_links;    /* "many new links": relative growth threshold in percent */
   int rays;           /* k: rays per link for the visibility fraction H */
+  int rays_min;       /* fewest rays for links that cannot carry BF_low (rays_min >= rays: all k) */
   uint64_t seed;      /* jitter seed */
   int threads;        /* 0 = all cores */
   int max_iters;      /* safety limit on total iterations */

@@ -6,6 +6,7 @@
 #include "solver_impl.h"
 #include "vec.h"
 
+#include <math.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -52,6 +53,9 @@ static int reserve(hr_solver *s, int64_t need) {
   double(*rho)[3] = realloc(s->rho, (size_t)nc * sizeof *rho);
   if (!rho) return 0;
   s->rho = rho;
+  double *rm = realloc(s->rho_max, (size_t)nc * sizeof *rm);
+  if (!rm) return 0;
+  s->rho_max = rm;
   s->cap_el = nc;
   return 1;
 }
@@ -83,6 +87,7 @@ hr_status hr_elem_init(hr_solver *s) {
       s->G[i][c] = 0;
       s->rho[i][c] = R[c];
     }
+    s->rho_max[i] = fmax(R[0], fmax(R[1], R[2]));
   }
   s->nel = sc->nsurfs;
   return HR_OK;
@@ -145,14 +150,9 @@ hr_status hr_elem_subdivide(hr_solver *s, int32_t idx) {
       s->G[first + k][c] = 0;
       s->rho[first + k][c] = s->rho[idx][c];
     }
+    s->rho_max[first + k] = s->rho_max[idx];
   }
   p->child = first;
   s->nel += 4;
   return HR_OK;
-}
-
-double hr_elem_rho_max(const hr_solver *s, const hr_elem *e) {
-  const double *r = s->scene->mats[s->scene->surfs[e->surf].material].rho;
-  double m = r[0] > r[1] ? r[0] : r[1];
-  return m > r[2] ? m : r[2];
 }

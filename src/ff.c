@@ -56,7 +56,7 @@ static inline hr_vec3 elem_point(const hr_elem *e, int nverts, double u, double 
 #define CHUNK 64
 
 double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
-                        const int32_t *cand, int ncand, int64_t *rays, double fmc[2]) {
+                        const int32_t *cand, int ncand, int k, int64_t *rays, double fmc[2]) {
   if (ncand == 0 && !fmc) return 1.0;
   /* Order the pair by gid so that H(a,b) == H(b,a); fmc follows the caller's order. */
   int swapped = a->gid > b->gid;
@@ -68,7 +68,7 @@ double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
   /* Ray-cast point-to-disk sums (Wallace et al.), over all samples drawn: kab for a receiving
    * from b, kba for b receiving from a. */
   double kab = 0, kba = 0;
-  int k = s->opt.rays;
+  if (k <= 0) k = s->opt.rays;
   const double invk = 1.0 / k; /* exact for the default k = 16 */
   int visible = 0, counted = 0;
   const hr_vec3 na = s->scene->surfs[a->surf].normal, nb = s->scene->surfs[b->surf].normal;

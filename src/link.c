@@ -13,6 +13,7 @@
 
 #include <omp.h>
 #include <stdlib.h>
+#include <math.h>
 #include <string.h>
 
 /* ncand of a link whose candidate list has not been built yet (initial links). */
@@ -44,7 +45,21 @@ static int pool_reserve(int32_t **pool, int64_t *cap, int64_t need) {
 
 /* ---------------------------------------------------------------- link evaluation */
 
-/* Fills F and H of link 'l' (receiver, source and candidate list already set). */
+/* Rays for the visible fraction between elements a and b, whose unoccluded form factors (eq. 2)
+ * are fab (a receiving from b) and fba: the full k where the pair can carry a BF of BF_low or
+ * more (w = max(rho_a F_ab, rho_b F_ba) >= BF_low, i.e. with a source as bright as the brightest
+ * emitter), and proportionally fewer below, down to k_min. H stays unbiased for any count; only
+ * its noise grows, on links that carry little energy (docs/design.md, "Rays per link"). The same
+ * count for both directions keeps H_ab == H_ba. */
+static int pair_rays(const hr_solver *s, int32_t a, int32_t b, double fab, double fba) {
+  int k = s->opt.rays, kmin = s->opt.rays_min;
+  if (kmin >= k || !(fab > 0)) return k;
+  double w = fab * s->rho_max[a], w2 = fba * s->rho_max[b];
+  w = w > w2 ? w : w2;
+  double kk = ceil(k * w / s->opt.bf_low);
+  return kk >= k ? k : kk > kmin ? (int)kk : kmin;
+}
+
 /* 1 if some corner of 'b' lies in front of the plane of element 'a'. */
 static int elem_in_front(const hr_solver *s, const hr_elem *a, const hr_elem *b) {
   hr_vec3 n = s->scene->surfs[a->surf].normal;
@@ -64,11 +79,12 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
   double f = hr_ff_unoccluded(s, r, j), h;
   l->Fu = (float)f;
   if (f > 0) {
-    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, rays, NULL);
+    int k = l->ncand == 0 ? 0 : pair_rays(s, l->r, l->s, f, hr_ff_unoccluded(s, j, r));
+    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, k, rays, NULL);
     f *= h;
   } else if (elem_in_front(s, r, j) && elem_in_front(s, j, r)) {
     double fmc[2];
-    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, rays, fmc);
+    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, 0, rays, fmc);
     f = fmc[0];
   } else {
     h = 0;
@@ -148,10 +164,12 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
       /* Eq. (2) where the centres face each other, else the ray-cast estimate (link_eval),
        * which is only computed when needed. */
       double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
-      double fji = hr_ff_unoccluded(s, &s->el[j], &s->el[i]);
+      /* Both directions share the two cosines: fji > 0 exactly when fij > 0. */
+      double fji = fij > 0 ? hr_ff_unoccluded(s, &s->el[j], &s->el[i]) : 0;
       double fmc[2];
-      double h = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, &rw->rays,
-                                  fij > 0 && fji > 0 ? NULL : fmc);
+      double h = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, pair_rays(s, i, j, fij, fji),
+                                  &rw->rays,
+                                  fij > 0 ? NULL : fmc);
       if (h == 0) continue;
       if (rw->nlinks + 2 > rw->cap) {
         int nc = rw->cap ? rw->cap * 2 : 16;

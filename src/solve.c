@@ -34,6 +34,7 @@ void hr_options_default(hr_options *o) {
   o->relax = 1;
   o->relax_links = 5;
   o->rays = 16;
+  o->rays_min = 4;
   o->seed = 1;
   o->threads = 0;
   o->max_iters = 1000;
@@ -51,6 +52,8 @@ static hr_status check_options(const hr_options *o, hr_err *err) {
   if (!(o->b_max >= o->b_eps)) return hr_err_set(err, HR_ERR_INVALID, "--b-max must be >= --b-eps");
   if (o->rays < 1 || o->rays > 4096)
     return hr_err_set(err, HR_ERR_INVALID, "--rays must be in 1..4096");
+  if (o->rays_min < 1 || o->rays_min > 4096)
+    return hr_err_set(err, HR_ERR_INVALID, "--rays-min must be in 1..4096");
   if (o->threads < 0) return hr_err_set(err, HR_ERR_INVALID, "--threads must be >= 0");
   if (o->max_iters < 1) return hr_err_set(err, HR_ERR_INVALID, "--max-iters must be >= 1");
   return HR_OK;
@@ -106,6 +109,7 @@ void hr_solver_destroy(hr_solver **ps) {
   free(s->B);
   free(s->G);
   free(s->rho);
+  free(s->rho_max);
   free(s->links);
   free(s->pool);
   free(s->rstart);

@@ -58,6 +58,7 @@ struct hr_solver {
   double (*B)[3];     /* radiosity per element */
   double (*G)[3];     /* gathered (irradiance-like, before rho) per element */
   double (*rho)[3];   /* reflectance per element (its surface's), beside B for the oracle */
+  double *rho_max;    /* largest channel of rho per element */
   /* Links. [0, nsorted) are grouped by receiver: rstart[idx]..rstart[idx+1] (rstart has
    * nrstart+1 entries; elements created since have none there). Links refined away in an
    * incremental pass stay in place, dead (H < 0, F = 0), until the next full sort; their
@@ -81,7 +82,6 @@ struct hr_solver {
 /* elem.c */
 hr_status hr_elem_init(hr_solver *s);                  /* one root per surface, idx == surface */
 hr_status hr_elem_subdivide(hr_solver *s, int32_t idx); /* creates 4 children if a leaf */
-double hr_elem_rho_max(const hr_solver *s, const hr_elem *e);
 
 /* ff.c */
 /* Unoccluded point-to-disk form factor of eq. (2) from receiver r to source j (source area A_j in
@@ -94,7 +94,7 @@ double hr_ff_unoccluded(const hr_solver *s, const hr_elem *r, const hr_elem *j);
  * (Wallace et al.) F(a <- b) and F(b <- a) over the same segments, for links whose centres face
  * away (eq. (2) gives 0 there although parts of the elements face each other). */
 double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
-                        const int32_t *cand, int ncand, int64_t *rays, double fmc[2]);
+                        const int32_t *cand, int ncand, int k, int64_t *rays, double fmc[2]);
 /* Counter-based hash of (seed, a, b, i): the only source of randomness. */
 uint64_t hr_hash4(uint64_t seed, uint64_t a, uint64_t b, uint64_t i);
 

@@ -77,13 +77,15 @@ static void usage(void) {
       "  --b-max X            B_max of the relaxed inner loop (default %g)\n"
       "  --no-relax           rigid inner loop (paper Figure 3) instead of section 2.2.4\n"
       "  --rays K             rays per link for the visible fraction H (default %d)\n"
+      "  --rays-min K         fewest rays, for links too weak to reach BF_low with the\n"
+      "                       brightest source (default %d; K >= --rays: always --rays)\n"
       "  --seed N             jitter seed (default %llu)\n"
       "  --threads N          worker threads (default: all cores)\n"
       "  --max-iters N        stop after N iterations (default %d)\n"
       "  --max-pairs N        refuse scenes with more surface pairs than N (default %g)\n"
       "  -h, --help           this help\n",
       d.bf_low, d.bf_start, d.bf_factor, d.area_min, d.b_eps, d.b_max, d.rays,
-      (unsigned long long)d.seed, d.max_iters, d.max_links);
+      d.rays_min, (unsigned long long)d.seed, d.max_iters, d.max_links);
 }
 
 static double parse_num(const char *opt, const char *v) {
@@ -164,6 +166,7 @@ static void parse_args(cli *c, int argc, char **argv) {
     else if (!strcmp(a, "--b-eps")) c->opt.b_eps = parse_num(a, NEXT());
     else if (!strcmp(a, "--b-max")) c->opt.b_max = parse_num(a, NEXT());
     else if (!strcmp(a, "--rays")) c->opt.rays = (int)parse_num(a, NEXT());
+    else if (!strcmp(a, "--rays-min")) c->opt.rays_min = (int)parse_num(a, NEXT());
     else if (!strcmp(a, "--seed")) c->opt.seed = (uint64_t)parse_num(a, NEXT());
     else if (!strcmp(a, "--threads")) c->opt.threads = (int)parse_num(a, NEXT());
     else if (!strcmp(a, "--max-iters")) c->opt.max_iters = (int)parse_num(a, NEXT());
