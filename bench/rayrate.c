@@ -17,8 +17,8 @@
  *                 like vis.c, one rtcOccluded16 per link (COHERENT context), no filter function.
  *                 Rays can then hit the surfaces they start or end on, so its blocked fraction may
  *                 be higher than the others'.
- *   hr_vis        hr_vis_segments (src/vis.c): the solver's call, packet of 16 plus the filter
- *                 that skips the link's own two surfaces.
+ *   hr_vis        hr_vis_segments (src/vis.c) as the solver calls it: the same segments with
+ *                 their ends lifted off their surfaces (hr_vis_lift), no skip filter.
  *   cand          hr_vis_segments_cand against the link's shaft-culled candidate list (lists
  *                 from hr_shaft_candidates, built outside the timed loop; their cost is printed).
  *   cand<=6       the same on the links whose list has at most 6 surfaces: the lists that the
@@ -162,7 +162,8 @@ static void raw_occluded16(const raw_embree *r, int n, const float *org, const f
 typedef struct {
   int L, K;
   int *a, *b;       /* surfaces of each link */
-  float *org, *dst; /* L*K*3 */
+  float *org, *dst;   /* L*K*3 */
+  float *lorg, *ldst; /* the same, ends lifted off their surfaces as the solver casts them */
   uint8_t *vis;     /* L*K */
   int32_t *cand;    /* concatenated shaft lists */
   int64_t *coff;    /* L+1 offsets into cand */
@@ -170,6 +171,7 @@ typedef struct {
 
 static void wl_free(workload *w) {
   free(w->a), free(w->b), free(w->org), free(w->dst), free(w->vis), free(w->cand), free(w->coff);
+  free(w->lorg), free(w->ldst);
   memset(w, 0, sizeof *w);
 }
 
@@ -179,14 +181,17 @@ static int wl_alloc(workload *w, int L, int K) {
   w->a = malloc(sizeof(int) * (size_t)L), w->b = malloc(sizeof(int) * (size_t)L);
   w->org = malloc(sizeof(float) * 3 * (size_t)L * (size_t)K);
   w->dst = malloc(sizeof(float) * 3 * (size_t)L * (size_t)K);
+  w->lorg = malloc(sizeof(float) * 3 * (size_t)L * (size_t)K);
+  w->ldst = malloc(sizeof(float) * 3 * (size_t)L * (size_t)K);
   w->vis = malloc((size_t)L * (size_t)K);
   w->coff = calloc((size_t)L + 1, sizeof(int64_t));
-  return w->a && w->b && w->org && w->dst && w->vis && w->coff;
+  return w->a && w->b && w->org && w->dst && w->lorg && w->ldst && w->vis && w->coff;
 }
 
 /* Random facing pairs with random segments. Returns 0 if the scene has (almost) none. */
 static int wl_make(const hr_scene *s, workload *w, int L, int K) {
   if (!wl_alloc(w, L, K)) return 0;
+  const double lift = hr_vis_lift(s);
   for (int l = 0; l < L; l++) {
     int a, b, tries = 0;
     do {
@@ -213,6 +218,11 @@ static int wl_make(const hr_scene *s, workload *w, int L, int K) {
       float *o = w->org + 3 * ((size_t)l * K + i), *d = w->dst + 3 * ((size_t)l * K + i);
       o[0] = (float)p.x, o[1] = (float)p.y, o[2] = (float)p.z;
       d[0] = (float)q.x, d[1] = (float)q.y, d[2] = (float)q.z;
+      float *lo = w->lorg + 3 * ((size_t)l * K + i), *ld = w->ldst + 3 * ((size_t)l * K + i);
+      lo[0] = (float)(p.x + lift * A->normal.x), lo[1] = (float)(p.y + lift * A->normal.y);
+      lo[2] = (float)(p.z + lift * A->normal.z);
+      ld[0] = (float)(q.x + lift * B->normal.x), ld[1] = (float)(q.y + lift * B->normal.y);
+      ld[2] = (float)(q.z + lift * B->normal.z);
     }
   next:;
   }
@@ -238,6 +248,8 @@ static int wl_visible(const workload *src, workload *dst) {
     dst->a[m] = src->a[l], dst->b[m] = src->b[l];
     memcpy(dst->org + 3 * (size_t)m * K, src->org + 3 * (size_t)l * K, sizeof(float) * 3 * K);
     memcpy(dst->dst + 3 * (size_t)m * K, src->dst + 3 * (size_t)l * K, sizeof(float) * 3 * K);
+    memcpy(dst->lorg + 3 * (size_t)m * K, src->lorg + 3 * (size_t)l * K, sizeof(float) * 3 * K);
+    memcpy(dst->ldst + 3 * (size_t)m * K, src->ldst + 3 * (size_t)l * K, sizeof(float) * 3 * K);
     m++;
   }
   return 1;
@@ -291,7 +303,9 @@ static void cast_link(int method, const hr_scene *s, const hr_vis *v, const raw_
   uint8_t *vis = w->vis + o;
   switch (method) {
   case M_RAW: raw_occluded16(raw, w->K, org, dst, vis); break;
-  case M_VIS: hr_vis_segments(v, w->K, org, dst, w->a[l], w->b[l], vis); break;
+  case M_VIS: /* as the solver casts: ends lifted, no skip filter */
+    hr_vis_segments(v, w->K, w->lorg + 3 * o, w->ldst + 3 * o, -1, -1, vis);
+    break;
   case M_CAND:
   case M_CAND6:
     hr_vis_segments_cand(s, w->cand + w->coff[l], (int)(w->coff[l + 1] - w->coff[l]), w->K, org,

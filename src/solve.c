@@ -9,7 +9,6 @@
 #include "solver_impl.h"
 #include "vec.h"
 
-#include <float.h>
 #include <math.h>
 #include <omp.h>
 #include <stdlib.h>
@@ -82,15 +81,7 @@ hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solv
   s->emax = emax;
   s->area_total = hr_scene_total_area(scene);
   s->area_min = o.area_min * s->area_total;
-  /* Ray ends are lifted off their surfaces by a few float ulps of the largest coordinate (see
-   * hr_ff_visibility), so that rounding to float never puts an end behind its own surface. */
-  double mag = 0;
-  for (int i = 0; i < scene->nsurfs; i++)
-    for (int k = 0; k < scene->surfs[i].nverts; k++) {
-      hr_vec3 v = scene->surfs[i].v[k];
-      mag = fmax(mag, fmax(fabs(v.x), fmax(fabs(v.y), fabs(v.z))));
-    }
-  s->lift = 16.0 * FLT_EPSILON * mag;
+  s->lift = hr_vis_lift(scene); /* see hr_ff_visibility */
   s->threads = o.threads > 0 ? o.threads : omp_get_num_procs();
   if ((st = hr_elem_init(s)) != HR_OK) {
     hr_solver_destroy(&s);

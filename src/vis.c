@@ -15,6 +15,7 @@
 #include "vec.h"
 
 #include <embree3/rtcore.h>
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -188,6 +189,16 @@ hr_status hr_vis_create(const hr_scene *s, hr_vis **out, hr_err *err) {
   rtcSetDeviceErrorFunction(v->dev, on_query_error, NULL);
   *out = v;
   return HR_OK;
+}
+
+double hr_vis_lift(const hr_scene *s) {
+  double mag = 0;
+  for (int i = 0; i < s->nsurfs; i++)
+    for (int k = 0; k < s->surfs[i].nverts; k++) {
+      hr_vec3 v = s->surfs[i].v[k];
+      mag = fmax(mag, fmax(fabs(v.x), fmax(fabs(v.y), fabs(v.z))));
+    }
+  return 16.0 * FLT_EPSILON * mag;
 }
 
 /* ------------------------------------------------------------------ Embree queries */

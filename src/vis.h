@@ -22,6 +22,10 @@ void hr_vis_destroy(hr_vis **v);
 
 /* Tests 'n' segments (org[i] -> dst[i]; 3 floats each) with Embree, in packets; vis[i] = 1 when
  * unoccluded, else 0. Any n >= 0. */
+/* Offset by which callers lift segment ends off their surfaces (along the front normal) so that
+ * after rounding to float a segment cannot hit its own end surfaces and needs no skip filter:
+ * 16 float epsilons of the scene's largest absolute coordinate. */
+double hr_vis_lift(const hr_scene *s);
 void hr_vis_segments(const hr_vis *v, int n, const float *org, const float *dst, int skip_a,
                      int skip_b, uint8_t *vis);
 
