@@ -376,6 +376,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       keep = k2;
       capkeep = nc;
     }
+#pragma omp parallel for schedule(static) if (ncur > PAR_MIN)
     for (int64_t i = 0; i < ncur; i++)
       if (dec[i] == KEEP) keep[nkeep + slot[i]] = cur[i];
     nkeep += nk;
@@ -510,16 +511,28 @@ hr_status hr_link_sort(hr_solver *s) {
     return HR_ERR_NOMEM;
   }
   group_by_receiver(s, 0, n, st, order);
+  /* New pool offsets in receiver order (serial prefix sum), then the copies in parallel. */
+  int64_t *noff = malloc((size_t)(n > 0 ? n : 1) * sizeof *noff);
+  if (!noff) {
+    free(order);
+    free(out);
+    free(np);
+    return HR_ERR_NOMEM;
+  }
   int64_t o = 0;
   for (int64_t k = 0; k < n; k++) {
+    int32_t nc = s->links[order[k]].ncand;
+    noff[k] = o;
+    o += nc > 0 ? nc : 0;
+  }
+#pragma omp parallel for schedule(static) if (n > PAR_MIN)
+  for (int64_t k = 0; k < n; k++) {
     hr_link l = s->links[order[k]];
-    if (l.ncand > 0) memcpy(np + o, s->pool + l.cand_off, (size_t)l.ncand * sizeof *np);
-    if (l.ncand >= 0) {
-      l.cand_off = (uint32_t)o;
-      o += l.ncand;
-    }
+    if (l.ncand > 0) memcpy(np + noff[k], s->pool + l.cand_off, (size_t)l.ncand * sizeof *np);
+    if (l.ncand >= 0) l.cand_off = (uint32_t)noff[k];
     out[k] = l;
   }
+  free(noff);
   free(order);
   free(s->links);
   free(s->pool);
