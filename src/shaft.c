@@ -200,8 +200,10 @@ static void shaft_build(shaft_t *sh, const hr_vec3 *pa, int na, const hr_vec3 *p
         add_plane_if_bounding(sh, v3_cross(e, v3_sub(q[j], a)), a, &p8, tol);
     }
   }
-  /* An edge and its polygon's normal: the hull's sides when both polygons are coplanar. */
-  for (int side = 0; side < 2; side++) {
+  /* An edge and its polygon's normal: the hull's sides when both polygons are coplanar. Other
+   * pairs need none: every face of the hull of two convex planar polygons that are not flat is
+   * a polygon's own plane or holds an edge of one polygon and a vertex of the other. */
+  for (int side = 0; side < 2 && flat; side++) {
     const hr_vec3 *p = side ? pb : pa;
     int np = side ? nb : na;
     hr_vec3 nrm = v3_newell(p, np);
