@@ -55,8 +55,34 @@ static inline hr_vec3 elem_point(const hr_elem *e, int nverts, double u, double 
 #define CAND_BRUTE_MAX 16 /* lists this short are tested directly (measured 45-60 Mrays/s) */
 #define CHUNK 64
 
+/* Segments through the blocker cache first, the rest through Embree; the surface that blocks
+ * the first segment Embree finds blocked joins the cache. */
+static void cast_cached(const hr_solver *s, hr_blockers *blk, int n, const float *org,
+                        const float *dst, int sa, int sb, uint8_t *vis) {
+  memset(vis, 1, (size_t)n);
+  if (hr_blockers_test(blk, n, org, dst, sa, sb, vis) == 0) return;
+  float o2[CHUNK * 3], d2[CHUNK * 3];
+  int idx[CHUNK], m = 0;
+  uint8_t v2[CHUNK];
+  for (int q = 0; q < n; q++) {
+    if (!vis[q]) continue;
+    memcpy(o2 + 3 * m, org + 3 * q, 3 * sizeof(float));
+    memcpy(d2 + 3 * m, dst + 3 * q, 3 * sizeof(float));
+    idx[m++] = q;
+  }
+  hr_vis_segments(s->vis, m, o2, d2, -1, -1, v2);
+  int learn = -1;
+  for (int r = 0; r < m; r++) {
+    vis[idx[r]] = v2[r];
+    if (!v2[r] && learn < 0) learn = r;
+  }
+  if (learn >= 0)
+    hr_blockers_add(blk, s->scene, hr_vis_first_hit(s->vis, o2 + 3 * learn, d2 + 3 * learn));
+}
+
 double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
-                        const int32_t *cand, int ncand, int k, int64_t *rays, double fmc[2]) {
+                        const int32_t *cand, int ncand, int k, hr_blockers *blk, int64_t *rays,
+                        double fmc[2]) {
   if (ncand == 0 && !fmc) return 1.0;
   /* Order the pair by gid so that H(a,b) == H(b,a); fmc follows the caller's order. */
   int swapped = a->gid > b->gid;
@@ -130,6 +156,8 @@ double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
     if (n == 0) continue;
     if (ncand == 0)
       memset(vis, 1, (size_t)n);
+    else if (embree && blk)
+      cast_cached(s, blk, n, org, dst, a->surf, b->surf, vis);
     else if (embree)
       hr_vis_segments(s->vis, n, org, dst, -1, -1, vis);
     else

@@ -80,11 +80,11 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
   l->Fu = (float)f;
   if (f > 0) {
     int k = l->ncand == 0 ? 0 : pair_rays(s, l->r, l->s, f, hr_ff_unoccluded(s, j, r));
-    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, k, rays, NULL);
+    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, k, NULL, rays, NULL);
     f *= h;
   } else if (elem_in_front(s, r, j) && elem_in_front(s, j, r)) {
     double fmc[2];
-    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, 0, rays, fmc);
+    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, 0, NULL, rays, fmc);
     f = fmc[0];
   } else {
     h = 0;
@@ -154,6 +154,8 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
   for (int i = 0; i < n; i++) {
     row *rw = &rows[i];
     const hr_surface *a = &sc->surfs[i];
+    hr_blockers blk;
+    hr_blockers_clear(&blk);
     for (int j = i + 1; j < n; j++) {
       const hr_surface *b = &sc->surfs[j];
       if (!in_front(a, b) || !in_front(b, a)) continue;
@@ -168,7 +170,7 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
       double fji = fij > 0 ? hr_ff_unoccluded(s, &s->el[j], &s->el[i]) : 0;
       double fmc[2];
       double h = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, pair_rays(s, i, j, fij, fji),
-                                  &rw->rays,
+                                  &blk, &rw->rays,
                                   fij > 0 ? NULL : fmc);
       if (h == 0) continue;
       if (rw->nlinks + 2 > rw->cap) {

@@ -94,7 +94,8 @@ double hr_ff_unoccluded(const hr_solver *s, const hr_elem *r, const hr_elem *j);
  * (Wallace et al.) F(a <- b) and F(b <- a) over the same segments, for links whose centres face
  * away (eq. (2) gives 0 there although parts of the elements face each other). */
 double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
-                        const int32_t *cand, int ncand, int k, int64_t *rays, double fmc[2]);
+                        const int32_t *cand, int ncand, int k, hr_blockers *blk, int64_t *rays,
+                        double fmc[2]);
 /* Counter-based hash of (seed, a, b, i): the only source of randomness. */
 uint64_t hr_hash4(uint64_t seed, uint64_t a, uint64_t b, uint64_t i);
 

@@ -343,6 +343,29 @@ void hr_vis_segments(const hr_vis *v, int n, const float *org, const float *dst,
   vis_segments_mode(v, n, org, dst, skip_a, skip_b, vis, 0);
 }
 
+int hr_vis_first_hit(const hr_vis *v, const float org[3], const float dst[3]) {
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  struct RTCRayHit rh;
+  rh.ray.org_x = org[0];
+  rh.ray.org_y = org[1];
+  rh.ray.org_z = org[2];
+  rh.ray.dir_x = dst[0] - org[0];
+  rh.ray.dir_y = dst[1] - org[1];
+  rh.ray.dir_z = dst[2] - org[2];
+  rh.ray.tnear = (float)HR_VIS_EPS;
+  rh.ray.tfar = (float)(1.0 - HR_VIS_EPS);
+  rh.ray.time = 0.0f;
+  rh.ray.mask = 0xFFFFFFFFu;
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(v->scene, &ctx, &rh);
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return -1;
+  return v->tri2surf[rh.hit.primID];
+}
+
 /* ------------------------------------------------------------------ exact tests */
 
 /* Candidates are prepared in chunks of CHUNK on the stack (any number of chunks), in
@@ -448,4 +471,82 @@ void hr_vis_segments_ref(const hr_scene *s, int n, const float *org, const float
     }
   }
   if (ch.n) chunk_test(&ch, n, org, dst, vis);
+}
+
+/* ------------------------------------------------------------------ blocker cache */
+
+void hr_blockers_clear(hr_blockers *b) {
+  b->n = 0;
+  /* Empty slots hold a plane that no segment crosses (every point 1 behind it). */
+  for (int m = 0; m < HR_BLK_MAX; m++) {
+    b->id[m] = -1;
+    b->nx[m] = b->ny[m] = b->nz[m] = 0;
+    b->d[m] = 1;
+    for (int j = 0; j < 4; j++) b->ex[j][m] = b->ey[j][m] = b->ez[j][m] = b->c[j][m] = 0;
+  }
+}
+
+#define SHIFT1(a) memmove((a) + 1, (a), (HR_BLK_MAX - 1) * sizeof *(a))
+
+void hr_blockers_add(hr_blockers *b, const hr_scene *s, int id) {
+  if (id < 0 || id >= s->nsurfs) return;
+  for (int k = 0; k < b->n; k++)
+    if (b->id[k] == id) return;
+  /* Newest in slot 0; the oldest falls off the end. */
+  SHIFT1(b->id), SHIFT1(b->nx), SHIFT1(b->ny), SHIFT1(b->nz), SHIFT1(b->d);
+  for (int j = 0; j < 4; j++) SHIFT1(b->ex[j]), SHIFT1(b->ey[j]), SHIFT1(b->ez[j]), SHIFT1(b->c[j]);
+  if (b->n < HR_BLK_MAX) b->n++;
+  const hr_surface *f = &s->surfs[id];
+  const hr_vec3 n = f->normal;
+  b->id[0] = id;
+  b->nx[0] = n.x;
+  b->ny[0] = n.y;
+  b->nz[0] = n.z;
+  b->d[0] = v3_dot(n, f->v[0]);
+  for (int j = 0; j < 4; j++) {
+    int k = j < f->nverts ? j : f->nverts - 1;
+    hr_vec3 a = f->v[k], c = f->v[(k + 1) % f->nverts];
+    hr_vec3 e = v3_cross(n, v3_sub(c, a));
+    b->ex[j][0] = e.x;
+    b->ey[j][0] = e.y;
+    b->ez[j][0] = e.z;
+    b->c[j][0] = v3_dot(e, a);
+  }
+}
+
+int hr_blockers_test(const hr_blockers *b, int n, const float *org, const float *dst, int skip_a,
+                     int skip_b, uint8_t *vis) {
+  const double lo = HR_VIS_EPS, hi = 1.0 - HR_VIS_EPS;
+  /* Slots in groups of 4, newest first, branch-free within a group (it vectorises); empty
+   * slots never block. */
+  double use[HR_BLK_MAX];
+  for (int k = 0; k < HR_BLK_MAX; k++) use[k] = b->id[k] == skip_a || b->id[k] == skip_b ? 0 : 1;
+  const int ng = (b->n + 3) / 4;
+  int left = 0;
+  for (int i = 0; i < n; i++) {
+    if (!vis[i]) continue;
+    const double o0 = org[3 * (size_t)i], o1 = org[3 * (size_t)i + 1], o2 = org[3 * (size_t)i + 2];
+    const double e0 = dst[3 * (size_t)i], e1 = dst[3 * (size_t)i + 1], e2 = dst[3 * (size_t)i + 2];
+    const double d0 = e0 - o0, d1 = e1 - o1, d2 = e2 - o2;
+    double hit = 0;
+    for (int g = 0; g < ng && hit == 0; g++) {
+      for (int k = 4 * g; k < 4 * g + 4; k++) {
+        double so = b->nx[k] * o0 + b->ny[k] * o1 + b->nz[k] * o2 - b->d[k];
+        double se = b->nx[k] * e0 + b->ny[k] * e1 + b->nz[k] * e2 - b->d[k];
+        double t = so / (so - se);
+        double x = o0 + t * d0, y = o1 + t * d1, z = o2 + t * d2;
+        int in = (t >= lo) & (t <= hi);
+        in &= b->ex[0][k] * x + b->ey[0][k] * y + b->ez[0][k] * z >= b->c[0][k];
+        in &= b->ex[1][k] * x + b->ey[1][k] * y + b->ez[1][k] * z >= b->c[1][k];
+        in &= b->ex[2][k] * x + b->ey[2][k] * y + b->ez[2][k] * z >= b->c[2][k];
+        in &= b->ex[3][k] * x + b->ey[3][k] * y + b->ez[3][k] * z >= b->c[3][k];
+        hit += in ? use[k] : 0;
+      }
+    }
+    if (hit > 0)
+      vis[i] = 0;
+    else
+      left++;
+  }
+  return left;
 }

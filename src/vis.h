@@ -20,12 +20,13 @@ typedef struct hr_vis hr_vis;
 hr_status hr_vis_create(const hr_scene *s, hr_vis **out, hr_err *err);
 void hr_vis_destroy(hr_vis **v);
 
-/* Tests 'n' segments (org[i] -> dst[i]; 3 floats each) with Embree, in packets; vis[i] = 1 when
- * unoccluded, else 0. Any n >= 0. */
 /* Offset by which callers lift segment ends off their surfaces (along the front normal) so that
  * after rounding to float a segment cannot hit its own end surfaces and needs no skip filter:
  * 16 float epsilons of the scene's largest absolute coordinate. */
 double hr_vis_lift(const hr_scene *s);
+
+/* Tests 'n' segments (org[i] -> dst[i]; 3 floats each) with Embree, in packets; vis[i] = 1 when
+ * unoccluded, else 0. Any n >= 0. */
 void hr_vis_segments(const hr_vis *v, int n, const float *org, const float *dst, int skip_a,
                      int skip_b, uint8_t *vis);
 
@@ -34,6 +35,28 @@ void hr_vis_segments(const hr_vis *v, int n, const float *org, const float *dst,
 void hr_vis_segments_cand(const hr_scene *s, const int32_t *cand, int ncand, int n,
                           const float *org, const float *dst, int skip_a, int skip_b,
                           uint8_t *vis);
+
+/* The surface that blocks the segment nearest to org (Embree, ends as in hr_vis_segments and no
+ * skipped surfaces), or -1 when it is unoccluded. */
+int hr_vis_first_hit(const hr_vis *v, const float org[3], const float dst[3]);
+
+/* A small cache of recent blockers (HR_BLK_MAX surfaces, newest first), tested exactly like
+ * hr_vis_segments_cand before a segment goes to Embree. Consecutive pairs from one surface are
+ * mostly hidden by the same few walls, so most of their segments stop here. */
+#define HR_BLK_MAX 8
+typedef struct hr_blockers {
+  int n; /* slots in use, newest first */
+  int id[HR_BLK_MAX];
+  double nx[HR_BLK_MAX], ny[HR_BLK_MAX], nz[HR_BLK_MAX], d[HR_BLK_MAX];
+  double ex[4][HR_BLK_MAX], ey[4][HR_BLK_MAX], ez[4][HR_BLK_MAX], c[4][HR_BLK_MAX];
+} hr_blockers;
+void hr_blockers_clear(hr_blockers *b);
+/* Adds surface 'id' (replacing the oldest entry when full); no-op if it is cached already. */
+void hr_blockers_add(hr_blockers *b, const hr_scene *s, int id);
+/* Sets vis[i] = 0 for the segments with vis[i] != 0 that a cached surface other than skip_a and
+ * skip_b blocks; returns how many remain visible. */
+int hr_blockers_test(const hr_blockers *b, int n, const float *org, const float *dst, int skip_a,
+                     int skip_b, uint8_t *vis);
 
 /* Slow reference: brute force against every surface of the scene. */
 void hr_vis_segments_ref(const hr_scene *s, int n, const float *org, const float *dst,

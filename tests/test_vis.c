@@ -384,6 +384,83 @@ static void test_embree_vs_ref(void) {
   hr_scene_destroy(&s);
 }
 
+/* ------------------------------------------------------------------ test 1c: blocker cache */
+
+/* hr_vis_first_hit names a surface that really blocks the segment (and -1 exactly when the
+ * reference finds it open); the blocker cache only ever closes segments that a cached surface
+ * other than the two skipped ones blocks, keeps at most HR_BLK_MAX distinct surfaces, and with
+ * the right blockers cached closes segments without Embree. */
+static void test_blockers(void) {
+  rng_state = 0x7654321ull;
+  hr_scene *s = random_scene(60, 120, 2);
+  hr_vis *v = NULL;
+  hr_err err;
+  REQUIRE(hr_vis_create(s, &v, &err) == HR_OK, "vis create: %s", err.msg);
+  hr_blockers blk;
+  hr_blockers_clear(&blk);
+  long segs = 0, bad_hit = 0, closed = 0, wrong_close = 0, blocked = 0;
+  for (int it = 0; it < 1500; it++) {
+    int a, b;
+    pick_facing_pair(s, &a, &b);
+    const hr_surface *A = &s->surfs[a], *B = &s->surfs[b];
+    float org[3 * 16], dst[3 * 16];
+    uint8_t ref[16], vis[16];
+    for (int i = 0; i < 16; i++) {
+      put_f(org + 3 * i, poly_point(A->v, A->nverts));
+      put_f(dst + 3 * i, poly_point(B->v, B->nverts));
+    }
+    hr_vis_segments_ref(s, 16, org, dst, a, b, ref);
+    memset(vis, 1, sizeof vis);
+    hr_blockers_test(&blk, 16, org, dst, a, b, vis);
+    for (int i = 0; i < 16; i++) {
+      segs++;
+      blocked += !ref[i];
+      if (vis[i]) continue;
+      closed++;
+      int by = 0;
+      for (int k = 0; k < blk.n; k++)
+        by |= blk.id[k] != a && blk.id[k] != b && segment_blocked_by(s, org + 3 * i, dst + 3 * i,
+                                                                      a, b, blk.id[k]);
+      wrong_close += !by || ref[i];
+    }
+    /* Learn from every segment the cache left open, as the solver does from one. */
+    for (int i = 0; i < 16; i++) {
+      if (!vis[i]) continue;
+      int h = hr_vis_first_hit(v, org + 3 * i, dst + 3 * i);
+      if (h < 0) continue;
+      if (h == a || h == b || !segment_blocked_by(s, org + 3 * i, dst + 3 * i, -1, -1, h)) bad_hit++;
+      hr_blockers_add(&blk, s, h);
+    }
+    CHECK(blk.n <= HR_BLK_MAX, "cache holds %d surfaces", blk.n);
+    for (int k = 0; k < blk.n; k++)
+      for (int q = k + 1; q < blk.n; q++) CHECK(blk.id[k] != blk.id[q], "duplicate in cache");
+  }
+  printf("test 1c: %ld segments (%ld blocked): cache closed %ld, %ld wrongly; %ld first hits "
+         "that do not block\n",
+         segs, blocked, closed, wrong_close, bad_hit);
+  CHECK(closed > blocked / 20, "the cache closed too few segments (%ld of %ld blocked)", closed,
+        blocked);
+  CHECK(wrong_close == 0, "the cache closed %ld segments that no cached surface blocks",
+        wrong_close);
+  CHECK(bad_hit * 1000 <= segs, "hr_vis_first_hit named a non-blocker %ld times", bad_hit);
+  /* A cached surface that is one of the pair's own is not used. */
+  {
+    int a, b;
+    pick_facing_pair(s, &a, &b);
+    float o[3], d[3];
+    put_f(o, poly_point(s->surfs[a].v, s->surfs[a].nverts));
+    put_f(d, poly_point(s->surfs[b].v, s->surfs[b].nverts));
+    hr_blockers one;
+    hr_blockers_clear(&one);
+    hr_blockers_add(&one, s, b);
+    uint8_t vv = 1;
+    hr_blockers_test(&one, 1, o, d, a, b, &vv);
+    CHECK(vv == 1, "the cache used the pair's own surface");
+  }
+  hr_vis_destroy(&v);
+  hr_scene_destroy(&s);
+}
+
 /* ------------------------------------------------------------------ test 2 and 4: shafts */
 
 typedef struct {
@@ -791,6 +868,7 @@ int main(void) {
   test_exact();
   test_plates();
   test_embree_vs_ref();
+  test_blockers();
   test_shafts();
   print_rates();
   if (failures) {
