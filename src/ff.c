@@ -184,3 +184,86 @@ double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
    * bounds it, and its children sample their own front parts. */
   return counted > 0 ? (double)visible / counted : 1.0;
 }
+
+/* Visible fractions of 'np' pairs (a, bs[q]) with ks[q] rays each, for initial linking: no
+ * candidate lists (Embree behind the blocker cache), a->gid < bs[q]->gid, and no straddle
+ * estimate. Samples, segments and H are those hr_ff_visibility computes when every sample counts;
+ * what the cache leaves open is cast in one call for the whole batch, so Embree gets full
+ * packets. A pair with a sample that does not count gets h[q] = -1: the caller computes it with
+ * hr_ff_visibility, which draws further samples. */
+void hr_ff_visibility_batch(const hr_solver *s, const hr_elem *a, const hr_elem *const *bs,
+                            const int *ks, int np, hr_blockers *blk, int64_t *rays, double *h) {
+  enum { MAXSEG = HR_FF_BATCH_SEGS };
+  float org[MAXSEG * 3], dst[MAXSEG * 3], o2[MAXSEG * 3], d2[MAXSEG * 3];
+  uint8_t vis[MAXSEG], v2[MAXSEG];
+  int first[HR_FF_BATCH_PAIRS + 1], idx[MAXSEG];
+  const hr_vec3 na = s->scene->surfs[a->surf].normal;
+  const int nva = s->scene->surfs[a->surf].nverts;
+  const hr_vec3 la = v3_scale(na, s->lift);
+  int nseg = 0, m = 0;
+  for (int q = 0; q < np; q++) {
+    const hr_elem *b = bs[q];
+    const int k = ks[q];
+    const double invk = 1.0 / k;
+    const hr_vec3 nb = s->scene->surfs[b->surf].normal, lb = v3_scale(nb, s->lift);
+    const int nvb = s->scene->surfs[b->surf].nverts;
+    const uint64_t key = hr_hash4(s->opt.seed, a->gid, b->gid, 0);
+    first[q] = nseg;
+    h[q] = 0;
+    for (int i = 0; i < k; i++) {
+      uint64_t h1 = mix64(key + (uint64_t)(2 * i + 1) * UINT64_C(0x9e3779b97f4a7c15));
+      uint64_t h2 = mix64(key + (uint64_t)(2 * i + 2) * UINT64_C(0x9e3779b97f4a7c15));
+      double ua = (i + unit(h1)) * invk, va = unit(h1 << 26 | h1 >> 38);
+      double ub = unit(h2), vb = ((i * 7 + 3) % k + unit(h2 << 26 | h2 >> 38)) * invk;
+      hr_vec3 p = elem_point(a, nva, ua, va), t = elem_point(b, nvb, ub, vb);
+      if (v3_dot(v3_sub(p, b->c), nb) <= 0 || v3_dot(v3_sub(t, a->c), na) <= 0) {
+        h[q] = -1; /* a sample that does not count: left to hr_ff_visibility */
+        nseg = first[q];
+        break;
+      }
+      p = v3_add(p, la);
+      t = v3_add(t, lb);
+      float *o = org + 3 * nseg, *d = dst + 3 * nseg;
+      o[0] = (float)p.x, o[1] = (float)p.y, o[2] = (float)p.z;
+      d[0] = (float)t.x, d[1] = (float)t.y, d[2] = (float)t.z;
+      nseg++;
+    }
+    if (h[q] < 0) continue;
+    /* The cache first (the pair's own surfaces cannot block: both ends are lifted in front of
+     * them). When segments stay open, the first one goes to Embree at once as a nearest-hit
+     * query: a blocker it finds joins the cache and closes what it can of the rest, so the next
+     * pairs of the row, hidden by the same walls, find it there. What is still open waits for
+     * one Embree call for the whole batch. */
+    int f = first[q], n = nseg - f;
+    memset(vis + f, 1, (size_t)n);
+    if (hr_blockers_test(blk, n, org + 3 * f, dst + 3 * f, a->surf, -1, vis + f) == 0) continue;
+    int i0 = f;
+    while (!vis[i0]) i0++;
+    int hit = hr_vis_first_hit(s->vis, org + 3 * i0, dst + 3 * i0);
+    vis[i0] = hit < 0;
+    if (hit >= 0) {
+      hr_blockers_add(blk, s->scene, hit);
+      hr_blockers_test(blk, nseg - i0 - 1, org + 3 * (i0 + 1), dst + 3 * (i0 + 1), a->surf, -1,
+                       vis + i0 + 1);
+    }
+    for (int i = i0 + 1; i < nseg; i++) {
+      if (!vis[i]) continue;
+      memcpy(o2 + 3 * m, org + 3 * i, 3 * sizeof(float));
+      memcpy(d2 + 3 * m, dst + 3 * i, 3 * sizeof(float));
+      idx[m++] = i;
+    }
+  }
+  first[np] = nseg;
+  if (nseg == 0) return;
+  *rays += nseg;
+  if (m > 0) {
+    hr_vis_segments(s->vis, m, o2, d2, -1, -1, v2);
+    for (int r = 0; r < m; r++) vis[idx[r]] = v2[r];
+  }
+  for (int q = 0; q < np; q++) {
+    if (h[q] < 0) continue;
+    int visible = 0;
+    for (int i = first[q]; i < first[q + 1]; i++) visible += vis[i];
+    h[q] = (double)visible / ks[q];
+  }
+}

@@ -138,6 +138,61 @@ typedef struct row {
   int err;
 } row;
 
+/* Facing pairs (i, j[q]) of one row of initial linking waiting for their visible fraction. */
+typedef struct pending {
+  int n, segs;
+  int j[HR_FF_BATCH_PAIRS], k[HR_FF_BATCH_PAIRS];
+  double fij[HR_FF_BATCH_PAIRS], fji[HR_FF_BATCH_PAIRS];
+} pending;
+
+/* Computes H for the pending pairs of row i (batched where the centres face each other, the
+ * rest one by one with the straddle estimate), appends the links of the visible ones in pair
+ * order and empties 'pd'. Returns 0 when out of memory.
+ *
+ * The k segments of a pair are cast against the whole scene: most pairs of a large scene are
+ * hidden from each other, and most initial links are never refined, so a candidate list is
+ * built only when a link first splits (see hr_link_refine). A pair all of whose k segments are
+ * blocked is taken as mutually invisible. */
+static int init_flush(const hr_solver *s, int i, pending *pd, hr_blockers *blk, row *rw) {
+  const hr_elem *bs[HR_FF_BATCH_PAIRS] = {NULL};
+  int kb[HR_FF_BATCH_PAIRS] = {0}, qb[HR_FF_BATCH_PAIRS], nb = 0;
+  double hb[HR_FF_BATCH_PAIRS], h[HR_FF_BATCH_PAIRS], fmc[HR_FF_BATCH_PAIRS][2];
+  for (int q = 0; q < pd->n; q++)
+    if (pd->fij[q] > 0 && pd->k[q] <= HR_FF_BATCH_SEGS) {
+      bs[nb] = &s->el[pd->j[q]];
+      kb[nb] = pd->k[q];
+      qb[nb++] = q;
+    }
+  hr_ff_visibility_batch(s, &s->el[i], bs, kb, nb, blk, &rw->rays, hb);
+  for (int q = 0; q < pd->n; q++) h[q] = -1;
+  for (int r = 0; r < nb; r++) h[qb[r]] = hb[r];
+  for (int q = 0; q < pd->n; q++) {
+    int j = pd->j[q];
+    if (h[q] < 0)
+      h[q] = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, pd->k[q], blk, &rw->rays,
+                              pd->fij[q] > 0 ? NULL : fmc[q]);
+    if (h[q] == 0) continue;
+    if (rw->nlinks + 2 > rw->cap) {
+      int nc = rw->cap ? rw->cap * 2 : 16;
+      hr_link *l = realloc(rw->links, (size_t)nc * sizeof *l);
+      if (!l) {
+        rw->err = 1;
+        return 0;
+      }
+      rw->links = l;
+      rw->cap = nc;
+    }
+    double fij = pd->fij[q], fji = pd->fji[q];
+    double Fij = fij > 0 ? fij * h[q] : fmc[q][0], Fji = fji > 0 ? fji * h[q] : fmc[q][1];
+    hr_link lij = {i, j, (float)Fij, (float)h[q], (float)fij, 0, NO_LIST};
+    hr_link lji = {j, i, (float)Fji, (float)h[q], (float)fji, 0, NO_LIST};
+    rw->links[rw->nlinks++] = lij;
+    rw->links[rw->nlinks++] = lji;
+  }
+  pd->n = pd->segs = 0;
+  return 1;
+}
+
 hr_status hr_link_init(hr_solver *s, hr_err *err) {
   const hr_scene *sc = s->scene;
   int n = sc->nsurfs;
@@ -156,38 +211,26 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
     const hr_surface *a = &sc->surfs[i];
     hr_blockers blk;
     hr_blockers_clear(&blk);
-    for (int j = i + 1; j < n; j++) {
-      const hr_surface *b = &sc->surfs[j];
-      if (!in_front(a, b) || !in_front(b, a)) continue;
-      /* The k segments are cast against the whole scene: most pairs of a large scene are
-       * hidden from each other, and most initial links are never refined, so a candidate list
-       * is built only when a link first splits (see hr_link_refine). A pair all of whose k
-       * segments are blocked is taken as mutually invisible. */
-      /* Eq. (2) where the centres face each other, else the ray-cast estimate (link_eval),
-       * which is only computed when needed. */
-      double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
-      /* Both directions share the two cosines: fji > 0 exactly when fij > 0. */
-      double fji = fij > 0 ? hr_ff_unoccluded(s, &s->el[j], &s->el[i]) : 0;
-      double fmc[2];
-      double h = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, pair_rays(s, i, j, fij, fji),
-                                  &blk, &rw->rays,
-                                  fij > 0 ? NULL : fmc);
-      if (h == 0) continue;
-      if (rw->nlinks + 2 > rw->cap) {
-        int nc = rw->cap ? rw->cap * 2 : 16;
-        hr_link *l = realloc(rw->links, (size_t)nc * sizeof *l);
-        if (!l) {
-          rw->err = 1;
-          break;
+    pending pd;
+    pd.n = pd.segs = 0;
+    for (int j = i + 1; j <= n; j++) {
+      if (j < n) {
+        const hr_surface *b = &sc->surfs[j];
+        if (!in_front(a, b) || !in_front(b, a)) continue;
+        /* Eq. (2) where the centres face each other, else the ray-cast estimate (link_eval).
+         * Both directions share the two cosines: fji > 0 exactly when fij > 0. */
+        double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
+        double fji = fij > 0 ? hr_ff_unoccluded(s, &s->el[j], &s->el[i]) : 0;
+        int k = pair_rays(s, i, j, fij, fji);
+        if (pd.n == HR_FF_BATCH_PAIRS || pd.segs + k > HR_FF_BATCH_SEGS) {
+          if (!init_flush(s, i, &pd, &blk, rw)) break;
         }
-        rw->links = l;
-        rw->cap = nc;
+        pd.j[pd.n] = j, pd.k[pd.n] = k, pd.fij[pd.n] = fij, pd.fji[pd.n] = fji;
+        pd.n++;
+        pd.segs += k;
+      } else if (!init_flush(s, i, &pd, &blk, rw)) {
+        break;
       }
-      double Fij = fij > 0 ? fij * h : fmc[0], Fji = fji > 0 ? fji * h : fmc[1];
-      hr_link lij = {i, j, (float)Fij, (float)h, (float)fij, 0, NO_LIST};
-      hr_link lji = {j, i, (float)Fji, (float)h, (float)fji, 0, NO_LIST};
-      rw->links[rw->nlinks++] = lij;
-      rw->links[rw->nlinks++] = lji;
     }
   }
   int64_t nl = 0;

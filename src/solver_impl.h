@@ -96,6 +96,12 @@ double hr_ff_unoccluded(const hr_solver *s, const hr_elem *r, const hr_elem *j);
 double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
                         const int32_t *cand, int ncand, int k, hr_blockers *blk, int64_t *rays,
                         double fmc[2]);
+/* Batches of hr_ff_visibility_batch: at most this many pairs and segments (k <= 4096 each, so
+ * a pair with more rays than HR_FF_BATCH_SEGS goes alone through hr_ff_visibility). */
+#define HR_FF_BATCH_PAIRS 32
+#define HR_FF_BATCH_SEGS 256
+void hr_ff_visibility_batch(const hr_solver *s, const hr_elem *a, const hr_elem *const *bs,
+                            const int *ks, int np, hr_blockers *blk, int64_t *rays, double *h);
 /* Counter-based hash of (seed, a, b, i): the only source of randomness. */
 uint64_t hr_hash4(uint64_t seed, uint64_t a, uint64_t b, uint64_t i);
 

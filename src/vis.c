@@ -499,51 +499,47 @@ void hr_blockers_add(hr_blockers *b, const hr_scene *s, int id) {
   const hr_surface *f = &s->surfs[id];
   const hr_vec3 n = f->normal;
   b->id[0] = id;
-  b->nx[0] = n.x;
-  b->ny[0] = n.y;
-  b->nz[0] = n.z;
-  b->d[0] = v3_dot(n, f->v[0]);
+  b->nx[0] = (float)n.x;
+  b->ny[0] = (float)n.y;
+  b->nz[0] = (float)n.z;
+  b->d[0] = (float)v3_dot(n, f->v[0]);
   for (int j = 0; j < 4; j++) {
     int k = j < f->nverts ? j : f->nverts - 1;
     hr_vec3 a = f->v[k], c = f->v[(k + 1) % f->nverts];
     hr_vec3 e = v3_cross(n, v3_sub(c, a));
-    b->ex[j][0] = e.x;
-    b->ey[j][0] = e.y;
-    b->ez[j][0] = e.z;
-    b->c[j][0] = v3_dot(e, a);
+    b->ex[j][0] = (float)e.x;
+    b->ey[j][0] = (float)e.y;
+    b->ez[j][0] = (float)e.z;
+    b->c[j][0] = (float)v3_dot(e, a);
   }
 }
 
 int hr_blockers_test(const hr_blockers *b, int n, const float *org, const float *dst, int skip_a,
                      int skip_b, uint8_t *vis) {
-  const double lo = HR_VIS_EPS, hi = 1.0 - HR_VIS_EPS;
-  /* Slots in groups of 4, newest first, branch-free within a group (it vectorises); empty
-   * slots never block. */
-  double use[HR_BLK_MAX];
-  for (int k = 0; k < HR_BLK_MAX; k++) use[k] = b->id[k] == skip_a || b->id[k] == skip_b ? 0 : 1;
-  const int ng = (b->n + 3) / 4;
+  const float lo = (float)HR_VIS_EPS, hi = (float)(1.0 - HR_VIS_EPS);
+  /* All slots at once, branch-free (8 float lanes: one vector); empty slots never block. */
+  int use[HR_BLK_MAX];
+  for (int k = 0; k < HR_BLK_MAX; k++) use[k] = b->id[k] != skip_a && b->id[k] != skip_b;
   int left = 0;
   for (int i = 0; i < n; i++) {
     if (!vis[i]) continue;
-    const double o0 = org[3 * (size_t)i], o1 = org[3 * (size_t)i + 1], o2 = org[3 * (size_t)i + 2];
-    const double e0 = dst[3 * (size_t)i], e1 = dst[3 * (size_t)i + 1], e2 = dst[3 * (size_t)i + 2];
-    const double d0 = e0 - o0, d1 = e1 - o1, d2 = e2 - o2;
-    double hit = 0;
-    for (int g = 0; g < ng && hit == 0; g++) {
-      for (int k = 4 * g; k < 4 * g + 4; k++) {
-        double so = b->nx[k] * o0 + b->ny[k] * o1 + b->nz[k] * o2 - b->d[k];
-        double se = b->nx[k] * e0 + b->ny[k] * e1 + b->nz[k] * e2 - b->d[k];
-        double t = so / (so - se);
-        double x = o0 + t * d0, y = o1 + t * d1, z = o2 + t * d2;
-        int in = (t >= lo) & (t <= hi);
-        in &= b->ex[0][k] * x + b->ey[0][k] * y + b->ez[0][k] * z >= b->c[0][k];
-        in &= b->ex[1][k] * x + b->ey[1][k] * y + b->ez[1][k] * z >= b->c[1][k];
-        in &= b->ex[2][k] * x + b->ey[2][k] * y + b->ez[2][k] * z >= b->c[2][k];
-        in &= b->ex[3][k] * x + b->ey[3][k] * y + b->ez[3][k] * z >= b->c[3][k];
-        hit += in ? use[k] : 0;
-      }
+    const float o0 = org[3 * (size_t)i], o1 = org[3 * (size_t)i + 1], o2 = org[3 * (size_t)i + 2];
+    const float e0 = dst[3 * (size_t)i], e1 = dst[3 * (size_t)i + 1], e2 = dst[3 * (size_t)i + 2];
+    const float d0 = e0 - o0, d1 = e1 - o1, d2 = e2 - o2;
+    int hit = 0;
+    for (int k = 0; k < HR_BLK_MAX; k++) {
+      float so = b->nx[k] * o0 + b->ny[k] * o1 + b->nz[k] * o2 - b->d[k];
+      float se = b->nx[k] * e0 + b->ny[k] * e1 + b->nz[k] * e2 - b->d[k];
+      float t = so / (so - se);
+      float x = o0 + t * d0, y = o1 + t * d1, z = o2 + t * d2;
+      int in = (t >= lo) & (t <= hi);
+      in &= b->ex[0][k] * x + b->ey[0][k] * y + b->ez[0][k] * z >= b->c[0][k];
+      in &= b->ex[1][k] * x + b->ey[1][k] * y + b->ez[1][k] * z >= b->c[1][k];
+      in &= b->ex[2][k] * x + b->ey[2][k] * y + b->ez[2][k] * z >= b->c[2][k];
+      in &= b->ex[3][k] * x + b->ey[3][k] * y + b->ez[3][k] * z >= b->c[3][k];
+      hit |= in & use[k];
     }
-    if (hit > 0)
+    if (hit)
       vis[i] = 0;
     else
       left++;

@@ -40,15 +40,17 @@ void hr_vis_segments_cand(const hr_scene *s, const int32_t *cand, int ncand, int
  * skipped surfaces), or -1 when it is unoccluded. */
 int hr_vis_first_hit(const hr_vis *v, const float org[3], const float dst[3]);
 
-/* A small cache of recent blockers (HR_BLK_MAX surfaces, newest first), tested exactly like
- * hr_vis_segments_cand before a segment goes to Embree. Consecutive pairs from one surface are
+/* A small cache of recent blockers (HR_BLK_MAX surfaces, newest first), tested like
+ * hr_vis_segments_cand (in single precision, as Embree tests) before a segment goes to Embree. Consecutive pairs from one surface are
  * mostly hidden by the same few walls, so most of their segments stop here. */
 #define HR_BLK_MAX 8
 typedef struct hr_blockers {
   int n; /* slots in use, newest first */
   int id[HR_BLK_MAX];
-  double nx[HR_BLK_MAX], ny[HR_BLK_MAX], nz[HR_BLK_MAX], d[HR_BLK_MAX];
-  double ex[4][HR_BLK_MAX], ey[4][HR_BLK_MAX], ez[4][HR_BLK_MAX], c[4][HR_BLK_MAX];
+  /* Planes and inward edge planes in float: the cache only stands in for Embree, whose tests
+   * are single precision too, and 8 lanes fit a vector. */
+  float nx[HR_BLK_MAX], ny[HR_BLK_MAX], nz[HR_BLK_MAX], d[HR_BLK_MAX];
+  float ex[4][HR_BLK_MAX], ey[4][HR_BLK_MAX], ez[4][HR_BLK_MAX], c[4][HR_BLK_MAX];
 } hr_blockers;
 void hr_blockers_clear(hr_blockers *b);
 /* Adds surface 'id' (replacing the oldest entry when full); no-op if it is cached already. */
