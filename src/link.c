@@ -97,7 +97,8 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
  * carry into its receiver (rho_i B_j F_ij per channel). When the elements' centres face away but
  * parts of them may still face each other, the cosines are bounded by 1 so that such a link
  * still refines instead of silently dropping its energy. */
-static double link_bf(const hr_solver *s, const hr_link *l) {
+/* The form factor the refinement oracle uses for link l (see link_bf). */
+static double oracle_f(const hr_solver *s, const hr_link *l) {
   double f = l->F;
   if (l->H > 0 && l->H < 1) {
     /* Partly visible: H rests on k rays and varies across the elements (a shadow boundary
@@ -110,8 +111,15 @@ static double link_bf(const hr_solver *s, const hr_link *l) {
     double r2 = v3_dot(v3_sub(j->c, r->c), v3_sub(j->c, r->c));
     f = j->area / (M_PI * r2 + j->area);
   }
-  /* Only the link and the per-element arrays rho and B are touched here: this runs for every
-   * link in every iteration. */
+  return f;
+}
+
+/* Refinement oracle: the largest energy, relative to the brightest emitter, that the link would
+ * carry into its receiver (rho_i B_j F_ij per channel). When the elements' centres face away but
+ * parts of them may still face each other, the cosines are bounded by 1 so that such a link
+ * still refines instead of silently dropping its energy. */
+static double link_bf(const hr_solver *s, const hr_link *l) {
+  double f = oracle_f(s, l);
   const double *rho = s->rho[l->r], *b = s->B[l->s];
   double m = 0;
   for (int c = 0; c < 3; c++) {
@@ -333,9 +341,41 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
   /* Most iterations split nothing: decide for every link first, without copying the graph. */
   uint8_t *dec = malloc((size_t)(s->nlinks > 0 ? s->nlinks : 1));
   if (!dec) return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
-  int64_t nsplit0 = 0;
-#pragma omp parallel for schedule(static) reduction(+ : nsplit0) if (s->nlinks > PAR_MIN)
-  for (int64_t i = 0; i < s->nlinks; i++) {
+  int64_t nsplit0 = 0, lo = 0;
+  if (s->sorted) {
+    /* The sorted links, receiver by receiver, from the compact source and oracle arrays (8
+     * bytes a link instead of the 28 of its record) and an upper bound of BF; only a link whose
+     * bound passes BF_e gets the exact test. */
+    float *bup = malloc((size_t)s->nel * sizeof *bup);
+    if (!bup) {
+      free(dec);
+      return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
+    }
+    /* Largest channel of B per element, rounded up to float: a small array that stays in
+     * cache while the pass reads the sources at random. */
+    for (int64_t e = 0; e < s->nel; e++) {
+      const double *b = s->B[e];
+      double x = b[0] > b[1] ? b[0] : b[1];
+      x = x > b[2] ? x : b[2];
+      float xf = (float)x;
+      bup[e] = (double)xf < x ? nextafterf(xf, INFINITY) : xf;
+    }
+    /* rho_max B_max F_up bounds rho_c B_c F from above; the margin covers the rounding of the
+     * products, so the bound never keeps a link that the exact test would split. */
+    const double lim = bf_e * s->emax * (1 - 1e-9);
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : nsplit0) if (s->nsorted > PAR_MIN)
+    for (int64_t e = 0; e < s->nrstart; e++) {
+      const double rm = s->rho_max[e];
+      for (int64_t k = s->rstart[e]; k < s->rstart[e + 1]; k++) {
+        dec[k] = rm * bup[s->ls[k]] * s->lfo[k] <= lim ? KEEP : decide(s, &s->links[k], bf_e);
+        nsplit0 += dec[k] != KEEP;
+      }
+    }
+    free(bup);
+    lo = s->nsorted;
+  }
+#pragma omp parallel for schedule(static) reduction(+ : nsplit0) if (s->nlinks - lo > PAR_MIN)
+  for (int64_t i = lo; i < s->nlinks; i++) {
     dec[i] = decide(s, &s->links[i], bf_e);
     nsplit0 += dec[i] != KEEP;
   }
@@ -363,6 +403,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       cur[ncur++] = *l;
       l->H = -1; /* dead */
       l->F = 0;
+      if (i < s->nsorted) s->lfo[i] = 0;
     }
     s->ndead += ncur;
   } else {
@@ -579,6 +620,24 @@ hr_status hr_link_sort(hr_solver *s) {
   }
   free(noff);
   free(order);
+  /* Compact copies for the decision pass (see hr_link_refine). */
+  int32_t *ls = realloc(s->ls, (size_t)(n > 0 ? n : 1) * sizeof *ls);
+  if (ls) s->ls = ls;
+  float *lfo = ls ? realloc(s->lfo, (size_t)(n > 0 ? n : 1) * sizeof *lfo) : NULL;
+  if (lfo) s->lfo = lfo;
+  if (!ls || !lfo) {
+    free(out);
+    free(np);
+    return HR_ERR_NOMEM;
+  }
+#pragma omp parallel for schedule(static) if (n > PAR_MIN)
+  for (int64_t k = 0; k < n; k++) {
+    double f = out[k].H > 0 ? oracle_f(s, &out[k]) : 0;
+    float fu = (float)f;
+    if ((double)fu < f) fu = nextafterf(fu, INFINITY);
+    s->ls[k] = out[k].s;
+    s->lfo[k] = fu;
+  }
   free(s->links);
   free(s->pool);
   s->links = out;

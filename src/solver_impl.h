@@ -72,6 +72,10 @@ struct hr_solver {
   int64_t nsorted, ndead;
   int64_t *xstart, *xidx; /* extras by receiver: xidx[xstart[e]..xstart[e+1]) index links */
   int sorted;             /* 0: a full sort is due */
+  /* For the decision pass, per sorted link: its source and the oracle's form factor rounded up
+   * to float (0 for dead links). */
+  int32_t *ls;
+  float *lfo;
   /* counters */
   int64_t rays, initial_links;
   int iterations, converged, threads;
