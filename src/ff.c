@@ -25,7 +25,22 @@ uint64_t hr_hash4(uint64_t seed, uint64_t a, uint64_t b, uint64_t i) {
   return mix64(h ^ (i * UINT64_C(0xd1b54a32d192ed03)));
 }
 
-static inline double unit(uint64_t h) { return (double)(h >> 11) * (1.0 / 9007199254740992.0); }
+/* The 16-bit field of 'h' at bit 'shift', as the centre of one of 65536 equal bins of [0, 1). */
+static inline double unit16(uint64_t h, int shift) {
+  return ((double)((h >> shift) & 0xffff) + 0.5) * (1.0 / 65536.0);
+}
+
+/* Parameters (u_a, v_a, u_b, v_b) of sample i of the pair keyed 'key' with k samples: one mix of
+ * (key, i), four 16-bit fields. Stratified in a's first and b's second parameter (strata i mod k
+ * and (7 i + 3) mod k), uniform in the other two. */
+static inline void sample_params(uint64_t key, int i, int k, double invk, double uv[4]) {
+  uint64_t h = mix64(key + (uint64_t)(i + 1) * UINT64_C(0x9e3779b97f4a7c15));
+  int si = i % k;
+  uv[0] = (si + unit16(h, 0)) * invk;
+  uv[1] = unit16(h, 16);
+  uv[2] = unit16(h, 32);
+  uv[3] = ((si * 7 + 3) % k + unit16(h, 48)) * invk;
+}
 
 double hr_ff_unoccluded(const hr_solver *s, const hr_elem *r, const hr_elem *j) {
   const hr_surface *fr = &s->scene->surfs[r->surf], *fj = &s->scene->surfs[j->surf];
@@ -118,13 +133,9 @@ double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
   while (counted < k && i < maxi) {
     int n = 0;
     for (; n < CHUNK && counted + n < k && i < maxi; i++) {
-      uint64_t h1 = mix64(key + (uint64_t)(2 * i + 1) * UINT64_C(0x9e3779b97f4a7c15));
-      uint64_t h2 = mix64(key + (uint64_t)(2 * i + 2) * UINT64_C(0x9e3779b97f4a7c15));
-      /* Stratified in the first parameter of each end, uniform in the second. */
-      int si = i % k;
-      double ua = (si + unit(h1)) * invk, va = unit(h1 << 26 | h1 >> 38);
-      double ub = unit(h2), vb = ((si * 7 + 3) % k + unit(h2 << 26 | h2 >> 38)) * invk;
-      hr_vec3 p = elem_point(a, nva, ua, va), t = elem_point(b, nvb, ub, vb);
+      double uv[4];
+      sample_params(key, i, k, invk, uv);
+      hr_vec3 p = elem_point(a, nva, uv[0], uv[1]), t = elem_point(b, nvb, uv[2], uv[3]);
       /* Only the parts of the two elements in front of each other exchange light: a sample
        * with an end behind the other element's plane is not counted (when an element straddles
        * the other's plane, such segments run through whatever solid the straddled surface
@@ -211,11 +222,9 @@ void hr_ff_visibility_batch(const hr_solver *s, const hr_elem *a, const hr_elem 
     first[q] = nseg;
     h[q] = 0;
     for (int i = 0; i < k; i++) {
-      uint64_t h1 = mix64(key + (uint64_t)(2 * i + 1) * UINT64_C(0x9e3779b97f4a7c15));
-      uint64_t h2 = mix64(key + (uint64_t)(2 * i + 2) * UINT64_C(0x9e3779b97f4a7c15));
-      double ua = (i + unit(h1)) * invk, va = unit(h1 << 26 | h1 >> 38);
-      double ub = unit(h2), vb = ((i * 7 + 3) % k + unit(h2 << 26 | h2 >> 38)) * invk;
-      hr_vec3 p = elem_point(a, nva, ua, va), t = elem_point(b, nvb, ub, vb);
+      double uv[4];
+      sample_params(key, i, k, invk, uv);
+      hr_vec3 p = elem_point(a, nva, uv[0], uv[1]), t = elem_point(b, nvb, uv[2], uv[3]);
       if (v3_dot(v3_sub(p, b->c), nb) <= 0 || v3_dot(v3_sub(t, a->c), na) <= 0) {
         h[q] = -1; /* a sample that does not count: left to hr_ff_visibility */
         nseg = first[q];

@@ -46,9 +46,9 @@ if "$hrad" --quiet $opts -o "$t/r1" --threads 1 room; then
   el=$(json "$t/r1/stats.json" elements); li=$(json "$t/r1/stats.json" links)
   it=$(json "$t/r1/stats.json" iterations)
   echo "     room: elements $el links $li iterations $it"
-  [ "$el" = "${GOLD_ELEMENTS:-4971}" ] && ok "room elements golden ($el)" || bad "room elements $el (golden ${GOLD_ELEMENTS:-4971})"
-  [ "$li" = "${GOLD_LINKS:-45549}" ] && ok "room links golden ($li)" || bad "room links $li (golden ${GOLD_LINKS:-45549})"
-  [ "$it" = "${GOLD_ITERS:-24}" ] && ok "room iterations golden ($it)" || bad "room iterations $it (golden ${GOLD_ITERS:-24})"
+  [ "$el" = "${GOLD_ELEMENTS:-4983}" ] && ok "room elements golden ($el)" || bad "room elements $el (golden ${GOLD_ELEMENTS:-4983})"
+  [ "$li" = "${GOLD_LINKS:-45852}" ] && ok "room links golden ($li)" || bad "room links $li (golden ${GOLD_LINKS:-45852})"
+  [ "$it" = "${GOLD_ITERS:-25}" ] && ok "room iterations golden ($it)" || bad "room iterations $it (golden ${GOLD_ITERS:-25})"
   for n in 2 3 4; do
     "$hrad" --quiet $opts -o "$t/r$n" --threads $n room
     cmp -s "$t/r1/surfaces.csv" "$t/r$n/surfaces.csv" && ok "room surfaces.csv identical with $n threads" \

@@ -161,7 +161,7 @@ static void weak_link_rays(void) {
   hr_options_default(&o);
   int64_t rays[2] = {0, 0};
   double mean[2] = {0, 0};
-  const int nseed = 256;
+  const int nseed = 1024; /* 4-ray H: sd 1.6% of the mean over 1024 seeds */
   for (int m = 0; m < 2; m++) {
     o.rays_min = m == 0 ? o.rays : 4;
     for (int seed = 1; seed <= nseed; seed++) {
