@@ -380,49 +380,64 @@ typedef struct {
   int n;
 } chunk_t;
 
+/* Stores surface f in slot m of P: a chunk_t (double) or an hr_blockers (float). */
+#define SLOT_SET(T, P, m, f)                                                                       \
+  do {                                                                                             \
+    const hr_vec3 n_ = (f)->normal;                                                                \
+    (P)->nx[m] = (T)n_.x, (P)->ny[m] = (T)n_.y, (P)->nz[m] = (T)n_.z;                              \
+    (P)->d[m] = (T)v3_dot(n_, (f)->v[0]);                                                          \
+    for (int j_ = 0; j_ < 4; j_++) {                                                               \
+      int k_ = j_ < (f)->nverts ? j_ : (f)->nverts - 1;                                            \
+      hr_vec3 a_ = (f)->v[k_], b_ = (f)->v[(k_ + 1) % (f)->nverts];                                \
+      hr_vec3 e_ = v3_cross(n_, v3_sub(b_, a_));                                                   \
+      (P)->ex[j_][m] = (T)e_.x, (P)->ey[j_][m] = (T)e_.y, (P)->ez[j_][m] = (T)e_.z;                \
+      (P)->c[j_][m] = (T)v3_dot(e_, a_);                                                           \
+    }                                                                                              \
+  } while (0)
+
+/* OUT = 1 when the segment from (o0,o1,o2) to (e0,e1,e2) (d0,d1,d2 = e - o; all of type T)
+ * crosses the plane of slot k of P at t = so / (so - se) in [lo, hi] (so, se: signed distances
+ * of its ends) at a point inside or on every edge. A segment in the plane gives t = NaN or +-inf
+ * and no hit. Branch-free, so that loops over slots vectorise. */
+#define SLOT_HIT(T, P, k, OUT)                                                                     \
+  do {                                                                                             \
+    T so_ = (P)->nx[k] * o0 + (P)->ny[k] * o1 + (P)->nz[k] * o2 - (P)->d[k];                       \
+    T se_ = (P)->nx[k] * e0 + (P)->ny[k] * e1 + (P)->nz[k] * e2 - (P)->d[k];                       \
+    T t_ = so_ / (so_ - se_);                                                                      \
+    T x_ = o0 + t_ * d0, y_ = o1 + t_ * d1, z_ = o2 + t_ * d2;                                     \
+    int in_ = (t_ >= lo) & (t_ <= hi);                                                             \
+    in_ &= (P)->ex[0][k] * x_ + (P)->ey[0][k] * y_ + (P)->ez[0][k] * z_ >= (P)->c[0][k];           \
+    in_ &= (P)->ex[1][k] * x_ + (P)->ey[1][k] * y_ + (P)->ez[1][k] * z_ >= (P)->c[1][k];           \
+    in_ &= (P)->ex[2][k] * x_ + (P)->ey[2][k] * y_ + (P)->ez[2][k] * z_ >= (P)->c[2][k];           \
+    in_ &= (P)->ex[3][k] * x_ + (P)->ey[3][k] * y_ + (P)->ez[3][k] * z_ >= (P)->c[3][k];           \
+    (OUT) = in_;                                                                                   \
+  } while (0)
+
+/* Loads segment i of org/dst as scalars of type T: o0..o2, e0..e2 and d = e - o. */
+#define SEG_LOAD(T, i)                                                                             \
+  const T o0 = org[3 * (size_t)(i)], o1 = org[3 * (size_t)(i) + 1], o2 = org[3 * (size_t)(i) + 2]; \
+  const T e0 = dst[3 * (size_t)(i)], e1 = dst[3 * (size_t)(i) + 1], e2 = dst[3 * (size_t)(i) + 2]; \
+  const T d0 = e0 - o0, d1 = e1 - o1, d2 = e2 - o2
+
 static void chunk_add(chunk_t *ch, const hr_surface *f) {
   const int m = ch->n++;
-  const hr_vec3 n = f->normal;
-  ch->nx[m] = n.x;
-  ch->ny[m] = n.y;
-  ch->nz[m] = n.z;
-  ch->d[m] = v3_dot(n, f->v[0]);
-  for (int j = 0; j < 4; j++) {
-    int k = j < f->nverts ? j : f->nverts - 1;
-    hr_vec3 a = f->v[k], b = f->v[(k + 1) % f->nverts];
-    hr_vec3 e = v3_cross(n, v3_sub(b, a));
-    ch->ex[j][m] = e.x;
-    ch->ey[j][m] = e.y;
-    ch->ez[j][m] = e.z;
-    ch->c[j][m] = v3_dot(e, a);
-  }
+  SLOT_SET(double, ch, m, f);
 }
 
-/* Tests the still-visible segments against one chunk: a segment is blocked by a polygon when it
- * crosses the plane at t = so / (so - se) in [HR_VIS_EPS, 1 - HR_VIS_EPS] (so, se: signed
- * distances of its ends) at a point inside or on every edge. A segment in the plane gives
- * t = NaN or +-inf and no hit. */
+/* Tests the still-visible segments against one chunk: a segment is blocked by a polygon it
+ * crosses at t in [HR_VIS_EPS, 1 - HR_VIS_EPS] (SLOT_HIT). */
 static void chunk_test(const chunk_t *ch, int n, const float *org, const float *dst, uint8_t *vis) {
   const int m = ch->n;
   const double lo = HR_VIS_EPS, hi = 1.0 - HR_VIS_EPS;
   for (int i = 0; i < n; i++) {
     if (!vis[i]) continue;
-    const double o0 = org[3 * (size_t)i], o1 = org[3 * (size_t)i + 1], o2 = org[3 * (size_t)i + 2];
-    const double e0 = dst[3 * (size_t)i], e1 = dst[3 * (size_t)i + 1], e2 = dst[3 * (size_t)i + 2];
-    const double d0 = e0 - o0, d1 = e1 - o1, d2 = e2 - o2;
+    SEG_LOAD(double, i);
     int hit = 0;
     for (int kb = 0; kb < m && !hit; kb += 16) { /* blocks of 16: vector loop, early exit */
       const int ke = kb + 16 < m ? kb + 16 : m;
       for (int k = kb; k < ke; k++) {
-        double so = ch->nx[k] * o0 + ch->ny[k] * o1 + ch->nz[k] * o2 - ch->d[k];
-        double se = ch->nx[k] * e0 + ch->ny[k] * e1 + ch->nz[k] * e2 - ch->d[k];
-        double t = so / (so - se);
-        double x = o0 + t * d0, y = o1 + t * d1, z = o2 + t * d2;
-        int in = (t >= lo) & (t <= hi);
-        in &= ch->ex[0][k] * x + ch->ey[0][k] * y + ch->ez[0][k] * z >= ch->c[0][k];
-        in &= ch->ex[1][k] * x + ch->ey[1][k] * y + ch->ez[1][k] * z >= ch->c[1][k];
-        in &= ch->ex[2][k] * x + ch->ey[2][k] * y + ch->ez[2][k] * z >= ch->c[2][k];
-        in &= ch->ex[3][k] * x + ch->ey[3][k] * y + ch->ez[3][k] * z >= ch->c[3][k];
+        int in;
+        SLOT_HIT(double, ch, k, in);
         hit |= in;
       }
     }
@@ -496,22 +511,8 @@ void hr_blockers_add(hr_blockers *b, const hr_scene *s, int id) {
   SHIFT1(b->id), SHIFT1(b->nx), SHIFT1(b->ny), SHIFT1(b->nz), SHIFT1(b->d);
   for (int j = 0; j < 4; j++) SHIFT1(b->ex[j]), SHIFT1(b->ey[j]), SHIFT1(b->ez[j]), SHIFT1(b->c[j]);
   if (b->n < HR_BLK_MAX) b->n++;
-  const hr_surface *f = &s->surfs[id];
-  const hr_vec3 n = f->normal;
   b->id[0] = id;
-  b->nx[0] = (float)n.x;
-  b->ny[0] = (float)n.y;
-  b->nz[0] = (float)n.z;
-  b->d[0] = (float)v3_dot(n, f->v[0]);
-  for (int j = 0; j < 4; j++) {
-    int k = j < f->nverts ? j : f->nverts - 1;
-    hr_vec3 a = f->v[k], c = f->v[(k + 1) % f->nverts];
-    hr_vec3 e = v3_cross(n, v3_sub(c, a));
-    b->ex[j][0] = (float)e.x;
-    b->ey[j][0] = (float)e.y;
-    b->ez[j][0] = (float)e.z;
-    b->c[j][0] = (float)v3_dot(e, a);
-  }
+  SLOT_SET(float, b, 0, &s->surfs[id]);
 }
 
 int hr_blockers_test(const hr_blockers *b, int n, const float *org, const float *dst, int skip_a,
@@ -523,20 +524,11 @@ int hr_blockers_test(const hr_blockers *b, int n, const float *org, const float 
   int left = 0;
   for (int i = 0; i < n; i++) {
     if (!vis[i]) continue;
-    const float o0 = org[3 * (size_t)i], o1 = org[3 * (size_t)i + 1], o2 = org[3 * (size_t)i + 2];
-    const float e0 = dst[3 * (size_t)i], e1 = dst[3 * (size_t)i + 1], e2 = dst[3 * (size_t)i + 2];
-    const float d0 = e0 - o0, d1 = e1 - o1, d2 = e2 - o2;
+    SEG_LOAD(float, i);
     int hit = 0;
     for (int k = 0; k < HR_BLK_MAX; k++) {
-      float so = b->nx[k] * o0 + b->ny[k] * o1 + b->nz[k] * o2 - b->d[k];
-      float se = b->nx[k] * e0 + b->ny[k] * e1 + b->nz[k] * e2 - b->d[k];
-      float t = so / (so - se);
-      float x = o0 + t * d0, y = o1 + t * d1, z = o2 + t * d2;
-      int in = (t >= lo) & (t <= hi);
-      in &= b->ex[0][k] * x + b->ey[0][k] * y + b->ez[0][k] * z >= b->c[0][k];
-      in &= b->ex[1][k] * x + b->ey[1][k] * y + b->ez[1][k] * z >= b->c[1][k];
-      in &= b->ex[2][k] * x + b->ey[2][k] * y + b->ez[2][k] * z >= b->c[2][k];
-      in &= b->ex[3][k] * x + b->ey[3][k] * y + b->ez[3][k] * z >= b->c[3][k];
+      int in;
+      SLOT_HIT(float, b, k, in);
       hit |= in & use[k];
     }
     if (hit)
