@@ -279,12 +279,19 @@ static int probe_noncandidates(const hr_scene *s, const hr_vec3 *a, int na, cons
 
 /* ------------------------------------------------------------------ test 1: Embree vs ref */
 
-static void test_embree_vs_ref(void) {
-  rng_state = 0x1234567ull;
+/* The random test scene of seed 'seed' (a room, 60 boxes, 120 triangles) and its ray caster. */
+static hr_scene *random_setup(uint64_t seed, hr_vis **v) {
+  rng_state = seed;
   hr_scene *s = random_scene(60, 120, 2);
-  hr_vis *v = NULL;
   hr_err err;
-  REQUIRE(hr_vis_create(s, &v, &err) == HR_OK, "vis create: %s", err.msg);
+  *v = NULL;
+  REQUIRE(hr_vis_create(s, v, &err) == HR_OK, "vis create: %s", err.msg);
+  return s;
+}
+
+static void test_embree_vs_ref(void) {
+  hr_vis *v;
+  hr_scene *s = random_setup(0x1234567ull, &v);
 
   const int target = 24000;
   float *org = malloc(sizeof(float) * 3 * 64), *dst = malloc(sizeof(float) * 3 * 64);
@@ -391,11 +398,8 @@ static void test_embree_vs_ref(void) {
  * other than the two skipped ones blocks, keeps at most HR_BLK_MAX distinct surfaces, and with
  * the right blockers cached closes segments without Embree. */
 static void test_blockers(void) {
-  rng_state = 0x7654321ull;
-  hr_scene *s = random_scene(60, 120, 2);
-  hr_vis *v = NULL;
-  hr_err err;
-  REQUIRE(hr_vis_create(s, &v, &err) == HR_OK, "vis create: %s", err.msg);
+  hr_vis *v;
+  hr_scene *s = random_setup(0x7654321ull, &v);
   hr_blockers blk;
   hr_blockers_clear(&blk);
   long segs = 0, bad_hit = 0, closed = 0, wrong_close = 0, blocked = 0;
