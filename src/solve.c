@@ -106,6 +106,8 @@ void hr_solver_destroy(hr_solver **ps) {
   free(s->rstart);
   free(s->xstart);
   free(s->xidx);
+  free(s->ls);
+  free(s->lfo);
   free(s);
   *ps = NULL;
 }
