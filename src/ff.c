@@ -70,29 +70,50 @@ static inline hr_vec3 elem_point(const hr_elem *e, int nverts, double u, double 
 #define CAND_BRUTE_MAX 16 /* lists this short are tested directly (measured 45-60 Mrays/s) */
 #define CHUNK 64
 
-/* Segments through the blocker cache first, the rest through Embree; the surface that blocks
- * the first segment Embree finds blocked joins the cache. */
+/* Tests n segments against the blocker cache (vis[i] = 0: closed). When some stay open, the
+ * first of them goes to Embree at once as a nearest-hit query: a blocker it finds joins the
+ * cache and closes what it can of the rest, so the next pairs of the row, hidden by the same
+ * walls, find it there; an open one is visible (vis = 1). Returns the index after which open
+ * segments are still undecided (n when none are). */
+static int cache_first(const hr_solver *s, hr_blockers *blk, int n, const float *org,
+                       const float *dst, int sa, int sb, uint8_t *vis) {
+  memset(vis, 1, (size_t)n);
+  if (hr_blockers_test(blk, n, org, dst, sa, sb, vis) == 0) return n;
+  int i0 = 0;
+  while (!vis[i0]) i0++;
+  int hit = hr_vis_first_hit(s->vis, org + 3 * i0, dst + 3 * i0);
+  vis[i0] = hit < 0;
+  if (hit >= 0) {
+    hr_blockers_add(blk, s->scene, hit);
+    hr_blockers_test(blk, n - i0 - 1, org + 3 * (i0 + 1), dst + 3 * (i0 + 1), sa, sb,
+                     vis + i0 + 1);
+  }
+  return i0 + 1;
+}
+
+/* Gathers the segments from index 'from' on that are still open into o2/d2 (from slot *m on,
+ * their indices plus 'base' into idx). */
+static void collect_open(int n, int from, int base, const float *org, const float *dst,
+                         const uint8_t *vis, float *o2, float *d2, int *idx, int *m) {
+  for (int i = from; i < n; i++) {
+    if (!vis[i]) continue;
+    memcpy(o2 + 3 * *m, org + 3 * i, 3 * sizeof(float));
+    memcpy(d2 + 3 * *m, dst + 3 * i, 3 * sizeof(float));
+    idx[(*m)++] = base + i;
+  }
+}
+
+/* Segments through the blocker cache (cache_first), the rest through Embree. */
 static void cast_cached(const hr_solver *s, hr_blockers *blk, int n, const float *org,
                         const float *dst, int sa, int sb, uint8_t *vis) {
-  memset(vis, 1, (size_t)n);
-  if (hr_blockers_test(blk, n, org, dst, sa, sb, vis) == 0) return;
+  int from = cache_first(s, blk, n, org, dst, sa, sb, vis);
   float o2[CHUNK * 3], d2[CHUNK * 3];
   int idx[CHUNK], m = 0;
   uint8_t v2[CHUNK];
-  for (int q = 0; q < n; q++) {
-    if (!vis[q]) continue;
-    memcpy(o2 + 3 * m, org + 3 * q, 3 * sizeof(float));
-    memcpy(d2 + 3 * m, dst + 3 * q, 3 * sizeof(float));
-    idx[m++] = q;
-  }
+  collect_open(n, from, 0, org, dst, vis, o2, d2, idx, &m);
+  if (m == 0) return;
   hr_vis_segments(s->vis, m, o2, d2, -1, -1, v2);
-  int learn = -1;
-  for (int r = 0; r < m; r++) {
-    vis[idx[r]] = v2[r];
-    if (!v2[r] && learn < 0) learn = r;
-  }
-  if (learn >= 0)
-    hr_blockers_add(blk, s->scene, hr_vis_first_hit(s->vis, o2 + 3 * learn, d2 + 3 * learn));
+  for (int r = 0; r < m; r++) vis[idx[r]] = v2[r];
 }
 
 double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
@@ -239,28 +260,11 @@ void hr_ff_visibility_batch(const hr_solver *s, const hr_elem *a, const hr_elem 
     }
     if (h[q] < 0) continue;
     /* The cache first (the pair's own surfaces cannot block: both ends are lifted in front of
-     * them). When segments stay open, the first one goes to Embree at once as a nearest-hit
-     * query: a blocker it finds joins the cache and closes what it can of the rest, so the next
-     * pairs of the row, hidden by the same walls, find it there. What is still open waits for
-     * one Embree call for the whole batch. */
-    int f = first[q], n = nseg - f;
-    memset(vis + f, 1, (size_t)n);
-    if (hr_blockers_test(blk, n, org + 3 * f, dst + 3 * f, a->surf, -1, vis + f) == 0) continue;
-    int i0 = f;
-    while (!vis[i0]) i0++;
-    int hit = hr_vis_first_hit(s->vis, org + 3 * i0, dst + 3 * i0);
-    vis[i0] = hit < 0;
-    if (hit >= 0) {
-      hr_blockers_add(blk, s->scene, hit);
-      hr_blockers_test(blk, nseg - i0 - 1, org + 3 * (i0 + 1), dst + 3 * (i0 + 1), a->surf, -1,
-                       vis + i0 + 1);
-    }
-    for (int i = i0 + 1; i < nseg; i++) {
-      if (!vis[i]) continue;
-      memcpy(o2 + 3 * m, org + 3 * i, 3 * sizeof(float));
-      memcpy(d2 + 3 * m, dst + 3 * i, 3 * sizeof(float));
-      idx[m++] = i;
-    }
+     * them); what is still open waits for one Embree call for the whole batch. */
+    const int f = first[q], n = nseg - f;
+    const float *of = org + 3 * f, *df = dst + 3 * f;
+    int from = cache_first(s, blk, n, of, df, a->surf, -1, vis + f);
+    collect_open(n, from, f, of, df, vis + f, o2, d2, idx, &m);
   }
   first[np] = nseg;
   if (nseg == 0) return;
