@@ -28,6 +28,7 @@
  * Embree works in float, the exact tests in double). */
 #include "hrad.h"
 #include "vis.h"
+#include "../tests/xorshift.h"
 
 #include <embree3/rtcore.h>
 #include <math.h>
@@ -39,16 +40,6 @@
 
 /* ---------------------------------------------------------------- helpers */
 
-static uint64_t rng_state;
-static uint64_t xorshift(void) {
-  uint64_t x = rng_state;
-  x ^= x << 13;
-  x ^= x >> 7;
-  x ^= x << 17;
-  return rng_state = x;
-}
-static double rnd(void) { return (double)(xorshift() >> 11) * (1.0 / 9007199254740992.0); }
-static int rnd_int(int n) { return (int)(xorshift() % (uint64_t)n); }
 
 static double clock_s(clockid_t id) {
   struct timespec ts;

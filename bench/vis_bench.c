@@ -13,21 +13,11 @@
  * Candidate brute force (16 rays/link): list of 1: 45-70, 4: 21-30, 16: 12-17, 64: 5.5-9 Mrays/s.
  * Shaft candidates: 5-10 us per pair (lists of 20-45), filter for a child pair 1.7-2.4 us. */
 #include "../src/vis.c"
+#include "../tests/xorshift.h"
 
 #include <stdio.h>
 #include <time.h>
 
-static uint64_t rng_state = 0x9e3779b97f4a7c15ull;
-static uint64_t xorshift(void) {
-  uint64_t x = rng_state;
-  x ^= x << 13;
-  x ^= x >> 7;
-  x ^= x << 17;
-  return rng_state = x;
-}
-static double rnd(void) { return (double)(xorshift() >> 11) * (1.0 / 9007199254740992.0); }
-static double rnd_in(double a, double b) { return a + (b - a) * rnd(); }
-static int rnd_int(int n) { return (int)(xorshift() % (uint64_t)n); }
 
 static double now_s(void) {
   struct timespec ts;
@@ -181,6 +171,7 @@ static double rate_stream(const hr_vis *v, workload *w, int coherent) {
 }
 
 int main(int argc, char **argv) {
+  rng_state = 0x9e3779b97f4a7c15ull;
   int nboxes = argc > 1 ? atoi(argv[1]) : 600, ntris = argc > 2 ? atoi(argv[2]) : 400;
   hr_scene *s = make_scene(nboxes, ntris);
   hr_vis *v = NULL;

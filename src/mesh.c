@@ -54,17 +54,8 @@ typedef struct kmap {
   int64_t alloc; /* allocated slots */
 } kmap;
 
-static inline uint64_t hash64(uint64_t x) {
-  x ^= x >> 31;
-  x *= 0x7fb5d329728ea185ull;
-  x ^= x >> 27;
-  x *= 0x81dadef4bc2dd44dull;
-  x ^= x >> 33;
-  return x;
-}
-
 static inline uint64_t key_hash(uint32_t kh, uint64_t kl) {
-  return hash64(kl ^ ((uint64_t)kh * 0x9e3779b97f4a7c15ull));
+  return u64_mix(kl ^ ((uint64_t)kh * 0x9e3779b97f4a7c15ull));
 }
 
 /* Prepares the map for up to 'n' keys (load <= 1/2); clears only the part used. */
@@ -356,17 +347,7 @@ static int log2u(uint32_t s) {
   return k;
 }
 
-static uint64_t pos_hash(hr_vec3 p) {
-  /* + 0.0 turns -0 into +0, which compares equal */
-  double c[3] = {p.x + 0.0, p.y + 0.0, p.z + 0.0};
-  uint64_t h = 0x9e3779b97f4a7c15ull;
-  for (int i = 0; i < 3; i++) {
-    uint64_t u;
-    memcpy(&u, &c[i], sizeof u);
-    h = hash64(h ^ u);
-  }
-  return h;
-}
+static uint64_t pos_hash(hr_vec3 p) { return v3_hash(0x9e3779b97f4a7c15ull, p); }
 
 /* Fills bd->gs for the 'ng' scene surfaces 'surfs' of one group: corner ids and shared edges.
  * O(ng) expected. */

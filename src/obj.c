@@ -191,6 +191,28 @@ static hr_status number_error(obj_ctx *c, const char *file, long line, int r, co
   return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: bad number '%.*s'", file, line, shown(n), tok);
 }
 
+/* Reads the numbers at 'p' up to the end of the line (or a comment) into v[0..max) and their
+ * count into '*n'. With 'stop', a number beyond the first 'max' ends the reading with *n = max+1
+ * (the caller reports too many); otherwise further numbers are checked and counted only. */
+static hr_status read_numbers(obj_ctx *c, const char *file, long line, char *p, double *v,
+                              int max, int stop, int *n) {
+  *n = 0;
+  for (;;) {
+    double d;
+    char *tok;
+    int r = next_number(&p, &d, &tok);
+    if (r == 0) return HR_OK;
+    if (r < 0) return number_error(c, file, line, r, tok);
+    if (*n < max) {
+      v[*n] = d;
+    } else if (stop) {
+      *n = max + 1;
+      return HR_OK;
+    }
+    ++*n;
+  }
+}
+
 /* ---------------------------------------------------------------- files */
 
 /* Reads the whole file into a fresh NUL-terminated buffer. On failure returns 0 with '*errnum'
@@ -282,18 +304,12 @@ static int find_or_add_material(hr_scene *s, const char *name, int *added) {
 static hr_status parse_color(obj_ctx *c, const char *mpath, long line, const char *key, char *p,
                              int is_kd, double rgb[3]) {
   double v[3] = {0, 0, 0};
-  int n = 0;
-  for (;;) {
-    double d;
-    char *tok;
-    int r = next_number(&p, &d, &tok);
-    if (r == 0) break;
-    if (r < 0) return number_error(c, mpath, line, r, tok);
-    if (n == 3)
-      return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: %s needs 1 or 3 numbers, got more", mpath,
-                        line, key);
-    v[n++] = d;
-  }
+  int n;
+  hr_status st = read_numbers(c, mpath, line, p, v, 3, 1, &n);
+  if (st != HR_OK) return st;
+  if (n > 3)
+    return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: %s needs 1 or 3 numbers, got more", mpath,
+                      line, key);
   if (n != 1 && n != 3)
     return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: %s needs 1 or 3 numbers, got %d", mpath, line,
                       key, n);
@@ -427,16 +443,9 @@ static hr_status do_usemtl(obj_ctx *c, long line, const char *name) {
 /* Handles `v x y z [w ...]` with the numbers at 'p'. */
 static hr_status do_vertex(obj_ctx *c, long line, char *p) {
   double x[3] = {0, 0, 0};
-  int n = 0;
-  for (;;) {
-    double d;
-    char *tok;
-    int r = next_number(&p, &d, &tok);
-    if (r == 0) break;
-    if (r < 0) return number_error(c, c->path, line, r, tok);
-    if (n < 3) x[n] = d;
-    n++;
-  }
+  int n;
+  hr_status st = read_numbers(c, c->path, line, p, x, 3, 0, &n);
+  if (st != HR_OK) return st;
   if (n < 3)
     return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: vertex needs 3 coordinates, got %d", c->path,
                       line, n);
@@ -491,15 +500,6 @@ static int cmp_pos(const void *pa, const void *pb) {
   return 0;
 }
 
-static uint64_t mix64(uint64_t x) {
-  x ^= x >> 31;
-  x *= 0x7fb5d329728ea185ull;
-  x ^= x >> 27;
-  x *= 0x81dadef4bc2dd44dull;
-  x ^= x >> 33;
-  return x;
-}
-
 /* Sorts and de-duplicates the current face's 'n' positions into c->sorted ('*m' of them) and
  * hashes them; 0 when out of memory. */
 static int face_key(obj_ctx *c, size_t n, size_t *m, uint64_t *hash) {
@@ -519,15 +519,7 @@ static int face_key(obj_ctx *c, size_t n, size_t *m, uint64_t *hash) {
   for (size_t i = 0; i < n; i++)
     if (k == 0 || cmp_pos(&c->sorted[k - 1], &c->sorted[i]) != 0) c->sorted[k++] = c->sorted[i];
   uint64_t h = 0x9e3779b97f4a7c15ull ^ k;
-  for (size_t i = 0; i < k; i++) {
-    /* + 0.0 turns -0 into +0, which compares equal */
-    double xyz[3] = {c->sorted[i].x + 0.0, c->sorted[i].y + 0.0, c->sorted[i].z + 0.0};
-    for (int j = 0; j < 3; j++) {
-      uint64_t u;
-      memcpy(&u, &xyz[j], sizeof u);
-      h = mix64(h ^ u);
-    }
-  }
+  for (size_t i = 0; i < k; i++) h = v3_hash(h, c->sorted[i]);
   *m = k;
   *hash = h;
   return 1;

@@ -2,6 +2,7 @@
  * tightness, candidate-list filtering, simple exact cases. Exits non-zero on failure. */
 #include "vec.h"
 #include "vis.h"
+#include "xorshift.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -34,17 +35,6 @@ static int failures = 0;
 
 /* ------------------------------------------------------------------ helpers */
 
-static uint64_t rng_state = 88172645463325252ull;
-static uint64_t xorshift(void) {
-  uint64_t x = rng_state;
-  x ^= x << 13;
-  x ^= x >> 7;
-  x ^= x << 17;
-  return rng_state = x;
-}
-static double rnd(void) { return (double)(xorshift() >> 11) * (1.0 / 9007199254740992.0); }
-static double rnd_in(double a, double b) { return a + (b - a) * rnd(); }
-static int rnd_int(int n) { return (int)(xorshift() % (uint64_t)n); }
 
 static double now_s(void) {
   struct timespec ts;
