@@ -35,6 +35,20 @@
  *            triangles, so 16 polygons give 17 surfaces), no front wall, McGuire's reflectances and light (E = 17, 12, 4), the
  *            light 0.1 mm below the ceiling, and the published camera (eye 278, 273, -800 mm,
  *            looking along +z, 39.3 degree field of view).
+ *   office   A furnished office lit by small bright lamps, 6 x 3 x 5 m (x, y, z), 292 polygons (all
+ *            axis-aligned rectangles), for the solver's accuracy where the lights are small and far
+ *            brighter than everything else (the walls come out near 0.3-0.5). Four 0.3 m square
+ *            ceiling lamps in housings on a 2 x 2 grid, emitting 4 cm below the ceiling
+ *            (E = 90, 88, 80 W/m^2), and a desk lamp whose 0.18 m shade bottom emits (75, 65, 50)
+ *            0.29 m above its desk: 0.39 m^2 of light, 0.25% of the area. Three desks on 0.08 m
+ *            legs (one against the blue x = 0 accent wall, one in the corner at x = 6, z = 0, one
+ *            free-standing), two monitors on necks, three chairs (seat, back, four legs), an open
+ *            bookshelf against the accent wall (sides, plinth, three shelves, three blocks of
+ *            books), a filing cabinet with three drawers and handles, a door, a whiteboard and a
+ *            picture 1 cm off their walls and a rug 5 mm above the carpet. Faces that touch the
+ *            floor, a wall, the ceiling or another block are left out; thin faces (desk and shelf
+ *            edges) are cut into pieces at most 9 times longer than wide. Camera in the corner at
+ *            x = 6, z = 5, looking over the free-standing desk toward the accent wall.
  */
 #include "hrad.h"
 #include "vec.h"
@@ -593,22 +607,243 @@ static void build_cornell(bld *b) {
              2.0 * atan(12.5 / 35.0) * 180.0 / M_PI);
 }
 
+/* ---------------------------------------------------------------- office */
+
+#define OF_W 6.0       /* x */
+#define OF_H 3.0       /* y */
+#define OF_D 5.0       /* z */
+#define OF_SPLIT 9.0   /* furniture faces longer than this many widths are cut into pieces */
+#define OF_DESK_H 0.75 /* desk top height */
+#define OF_DESK_T 0.06 /* desk top thickness */
+
+enum { F_ALL = F_NOBOTTOM | F_YN, F_SIDES = F_XN | F_XP | F_ZN | F_ZP };
+
+typedef struct of_mats {
+  int floor, ceil, wall, accent, lamp, desk_lamp, housing, shade, desk, metal, monitor, screen,
+      chair, shelf, book[3], cabinet, door, whiteboard, picture, rug;
+} of_mats;
+
+/* The box_out() bit of the face with normal 'dir'. */
+static int face_bit(int dir) {
+  switch (dir) {
+  case XN: return F_XN;
+  case XP: return F_XP;
+  case YN: return F_YN;
+  case YP: return F_YP;
+  case ZN: return F_ZN;
+  default: return F_ZP;
+  }
+}
+
+/* rect(), cut across its longer side into the fewest equal pieces that are at most OF_SPLIT
+ * times longer than wide (a desk top's edge, a shelf's front): no slivers. Neighbouring pieces
+ * get their common coordinate from the same expression, so they share edges exactly. */
+static void rect_split(bld *b, int dir, hr_vec3 lo, hr_vec3 hi, int m) {
+  int a = abs(dir) - 1, u = (a + 1) % 3, v = (a + 2) % 3;
+  double du = comp(hi, u) - comp(lo, u), dv = comp(hi, v) - comp(lo, v);
+  int ax = du >= dv ? u : v;
+  double l = fmax(du, dv), w = fmin(du, dv);
+  int n = w > 0 ? (int)ceil(l / (OF_SPLIT * w)) : 1;
+  if (n < 1) n = 1;
+  for (int k = 0; k < n; k++) {
+    hr_vec3 p = lo, q = hi;
+    set_comp(&p, ax, comp(lo, ax) + l * k / n);
+    if (k + 1 < n) set_comp(&q, ax, comp(lo, ax) + l * (k + 1) / n);
+    rect(b, dir, p, q, m);
+  }
+}
+
+/* box_out() with rect_split() faces, in the same face order (+y, -y, -x, +x, -z, +z). */
+static void of_box(bld *b, hr_vec3 lo, hr_vec3 hi, int m, int mask) {
+  if (mask & F_YP) rect_split(b, YP, v3(lo.x, hi.y, lo.z), hi, m);
+  if (mask & F_YN) rect_split(b, YN, lo, v3(hi.x, lo.y, hi.z), m);
+  if (mask & F_XN) rect_split(b, XN, lo, v3(lo.x, hi.y, hi.z), m);
+  if (mask & F_XP) rect_split(b, XP, v3(hi.x, lo.y, lo.z), hi, m);
+  if (mask & F_ZN) rect_split(b, ZN, lo, v3(hi.x, hi.y, lo.z), m);
+  if (mask & F_ZP) rect_split(b, ZP, v3(lo.x, lo.y, hi.z), hi, m);
+}
+
+/* Ceiling lamp centred on (cx, cz): a 0.3 m square emitter facing down 4 cm below the ceiling,
+ * then the four sides of its housing (5 polygons). */
+static void of_ceiling_lamp(bld *b, double cx, double cz, const of_mats *m) {
+  const double h = 0.15, y = OF_H - 0.04;
+  rect(b, YN, v3(cx - h, y, cz - h), v3(cx + h, y, cz + h), m->lamp);
+  of_box(b, v3(cx - h, y, cz - h), v3(cx + h, OF_H, cz + h), m->housing, F_SIDES);
+}
+
+/* Desk: a 0.06 m top at 0.75 m over [x0,x1] x [z0,z1] (its edges cut by rect_split), without
+ * the edge faces in 'against' (they touch a wall), then four 0.08 m square legs inset 4 cm
+ * (4 sides each: they stand on the floor and carry the top). */
+static void of_desk(bld *b, double x0, double z0, double x1, double z1, int against,
+                    const of_mats *m) {
+  const double yb = OF_DESK_H - OF_DESK_T, lw = 0.08, li = 0.04;
+  of_box(b, v3(x0, yb, z0), v3(x1, OF_DESK_H, z1), m->desk, F_ALL & ~against);
+  for (int i = 0; i < 4; i++) {
+    double x = i & 1 ? x1 - li - lw : x0 + li, z = i & 2 ? z1 - li - lw : z0 + li;
+    of_box(b, v3(x, 0, z), v3(x + lw, yb, z + lw), m->metal, F_SIDES);
+  }
+}
+
+/* Monitor on a desk top, centred on (cx, cz) and facing 'dir' (+-x or +-z): a 0.52 x 0.32 x
+ * 0.06 m case whose front is the screen, on a 0.10 x 0.14 x 0.03 m neck. Polygons: case (5),
+ * screen (1), neck (4). */
+static void of_monitor(bld *b, double cx, double cz, int dir, const of_mats *m) {
+  const double y0 = OF_DESK_H, yn = y0 + 0.14, y1 = yn + 0.32;
+  const double hw = 0.26, hd = 0.03, nw = 0.05, nd = 0.015;
+  int fx = abs(dir) == 1; /* facing along x: the width runs along z */
+  double wx = fx ? hd : hw, wz = fx ? hw : hd, nx = fx ? nd : nw, nz = fx ? nw : nd;
+  hr_vec3 lo = v3(cx - wx, yn, cz - wz), hi = v3(cx + wx, y1, cz + wz);
+  of_box(b, lo, hi, m->monitor, F_ALL & ~face_bit(dir));
+  of_box(b, lo, hi, m->screen, face_bit(dir));
+  of_box(b, v3(cx - nx, y0, cz - nz), v3(cx + nx, yn, cz + nz), m->monitor, F_SIDES);
+}
+
+/* Chair centred on (cx, cz): a 0.46 x 0.06 x 0.46 m seat (top at 0.48 m, all 6 faces), a
+ * 0.45 m tall, 0.06 m thick back standing on the seat's edge on side 'back' (a direction; 5
+ * faces), and four 0.05 m square legs from the floor to the seat (4 sides each): 27 polygons. */
+static void of_chair(bld *b, double cx, double cz, int back, const of_mats *m) {
+  const double h = 0.23, ys = 0.42, yt = 0.48, yb = 0.93, t = 0.06, lw = 0.05, li = 0.02;
+  of_box(b, v3(cx - h, ys, cz - h), v3(cx + h, yt, cz + h), m->chair, F_ALL);
+  hr_vec3 lo = v3(cx - h, yt, cz - h), hi = v3(cx + h, yb, cz + h);
+  switch (back) {
+  case XP: lo.x = cx + h - t; break;
+  case XN: hi.x = cx - h + t; break;
+  case ZP: lo.z = cz + h - t; break;
+  default: hi.z = cz - h + t; break;
+  }
+  of_box(b, lo, hi, m->chair, F_NOBOTTOM);
+  for (int i = 0; i < 4; i++) {
+    double x = i & 1 ? cx + h - li - lw : cx - h + li, z = i & 2 ? cz + h - li - lw : cz - h + li;
+    of_box(b, v3(x, 0, z), v3(x + lw, ys, z + lw), m->metal, F_SIDES);
+  }
+}
+
+/* Desk lamp on a desk top, its base centred on (cx, cz): a 0.16 m square base (5 polygons), a
+ * 0.05 m square stem 0.38 m tall (5), an arm reaching 0.225 m along +z from the stem to the
+ * head's side (4), and the head: a 0.18 m square emitter facing down 0.29 m above the desk
+ * (1), then the shade's top and sides (5). */
+static void of_desk_lamp(bld *b, double cx, double cz, const of_mats *m) {
+  const double y0 = OF_DESK_H, z0 = cz + 0.025, z1 = z0 + 0.225;
+  of_box(b, v3(cx - 0.08, y0, cz - 0.08), v3(cx + 0.08, y0 + 0.025, cz + 0.08), m->metal,
+         F_NOBOTTOM);
+  of_box(b, v3(cx - 0.025, y0 + 0.025, cz - 0.025), v3(cx + 0.025, y0 + 0.405, cz + 0.025),
+         m->metal, F_NOBOTTOM);
+  of_box(b, v3(cx - 0.02, y0 + 0.33, z0), v3(cx + 0.02, y0 + 0.37, z1), m->metal,
+         F_XN | F_XP | F_YN | F_YP);
+  hr_vec3 lo = v3(cx - 0.09, y0 + 0.29, z1), hi = v3(cx + 0.09, y0 + 0.39, z1 + 0.18);
+  rect(b, YN, lo, v3(hi.x, lo.y, hi.z), m->desk_lamp);
+  of_box(b, lo, hi, m->shade, F_NOBOTTOM);
+}
+
+/* Open bookshelf against the x = 0 wall over z in [z0, z1], 0.35 m deep and 1.9 m tall; the
+ * wall is its back. Two 0.06 m sides (7 polygons each: top, front in 4 pieces, two faces), a
+ * 0.08 m plinth (top, front in 2), three 0.04 m shelves (top, bottom, front in 3; the top
+ * shelf flush with the sides) and three blocks of books (top, front, two sides): 44 polygons. */
+static void of_bookshelf(bld *b, double z0, double z1, const of_mats *m) {
+  const double d = 0.35, h = 1.9, t = 0.06, a0 = z0 + t, a1 = z1 - t;
+  of_box(b, v3(0, 0, z0), v3(d, h, a0), m->shelf, F_YP | F_XP | F_ZN | F_ZP);
+  of_box(b, v3(0, 0, a1), v3(d, h, z1), m->shelf, F_YP | F_XP | F_ZN | F_ZP);
+  of_box(b, v3(0, 0, a0), v3(d, 0.08, a1), m->shelf, F_YP | F_XP);
+  static const double sy[3] = {0.64, 1.24, 1.86};
+  for (int i = 0; i < 3; i++)
+    of_box(b, v3(0, sy[i], a0), v3(d, sy[i] + 0.04, a1), m->shelf, F_YP | F_YN | F_XP);
+  /* y0, y1 and z (from z0) of the books on the plinth, the first and the second shelf. */
+  static const double bk[3][4] = {
+      {0.08, 0.36, 0.12, 0.55}, {0.68, 0.93, 0.50, 0.98}, {1.28, 1.58, 0.10, 0.45}};
+  for (int i = 0; i < 3; i++)
+    of_box(b, v3(0, bk[i][0], z0 + bk[i][2]), v3(0.27, bk[i][1], z0 + bk[i][3]), m->book[i],
+           F_YP | F_XP | F_ZN | F_ZP);
+}
+
+/* Filing cabinet against the z = 0 wall from x0: 0.5 x 1.05 x 0.6 m; top and sides (3), the
+ * front as three drawer fronts (3), and a 0.16 m handle on each drawer (5 each): 21 polygons. */
+static void of_cabinet(bld *b, double x0, const of_mats *m) {
+  const double w = 0.5, h = 1.05, d = 0.6, dh = h / 3;
+  of_box(b, v3(x0, 0, 0), v3(x0 + w, h, d), m->cabinet, F_YP | F_XN | F_XP);
+  for (int i = 0; i < 3; i++)
+    vrect(b, ZP, d, x0, x0 + w, i * dh, i == 2 ? h : (i + 1) * dh, m->cabinet);
+  for (int i = 0; i < 3; i++) {
+    double y = (i + 1) * dh - 0.08;
+    of_box(b, v3(x0 + 0.17, y, d), v3(x0 + 0.33, y + 0.03, d + 0.03), m->metal,
+           F_YP | F_YN | F_XN | F_XP | F_ZP);
+  }
+}
+
+static void build_office(bld *b) {
+  const double W = OF_W, H = OF_H, D = OF_D;
+  of_mats m;
+  m.floor = mat(b, "carpet", 0.38, 0.36, 0.33, 0, 0, 0);
+  m.ceil = mat(b, "ceiling", 0.80, 0.80, 0.78, 0, 0, 0);
+  m.wall = mat(b, "wall", 0.74, 0.72, 0.68, 0, 0, 0);
+  m.accent = mat(b, "wall_blue", 0.18, 0.30, 0.58, 0, 0, 0);
+  m.lamp = mat(b, "lamp", 0.80, 0.80, 0.80, 90, 88, 80);
+  m.desk_lamp = mat(b, "desk_lamp", 0.80, 0.80, 0.80, 75, 65, 50);
+  m.housing = mat(b, "lamp_housing", 0.70, 0.70, 0.70, 0, 0, 0);
+  m.shade = mat(b, "lamp_shade", 0.25, 0.42, 0.30, 0, 0, 0);
+  m.desk = mat(b, "desk", 0.58, 0.44, 0.30, 0, 0, 0);
+  m.metal = mat(b, "metal", 0.40, 0.40, 0.42, 0, 0, 0);
+  m.monitor = mat(b, "monitor", 0.15, 0.15, 0.16, 0, 0, 0);
+  m.screen = mat(b, "screen", 0.10, 0.10, 0.12, 0, 0, 0);
+  m.chair = mat(b, "chair", 0.62, 0.24, 0.12, 0, 0, 0);
+  m.shelf = mat(b, "bookshelf", 0.45, 0.32, 0.20, 0, 0, 0);
+  m.book[0] = mat(b, "books_red", 0.55, 0.14, 0.12, 0, 0, 0);
+  m.book[1] = mat(b, "books_green", 0.18, 0.42, 0.22, 0, 0, 0);
+  m.book[2] = mat(b, "books_ochre", 0.72, 0.55, 0.20, 0, 0, 0);
+  m.cabinet = mat(b, "cabinet", 0.55, 0.56, 0.58, 0, 0, 0);
+  m.door = mat(b, "door", 0.42, 0.28, 0.16, 0, 0, 0);
+  m.whiteboard = mat(b, "whiteboard", 0.80, 0.80, 0.80, 0, 0, 0);
+  m.picture = mat(b, "picture", 0.75, 0.50, 0.18, 0, 0, 0);
+  m.rug = mat(b, "rug", 0.22, 0.45, 0.38, 0, 0, 0);
+  /* Shell, all faces inward (0-5). */
+  rect(b, YP, v3(0, 0, 0), v3(W, 0, D), m.floor);
+  rect(b, YN, v3(0, H, 0), v3(W, H, D), m.ceil);
+  vrect(b, ZP, 0, 0, W, 0, H, m.wall);
+  vrect(b, ZN, D, 0, W, 0, H, m.wall);
+  vrect(b, XP, 0, 0, D, 0, H, m.accent);
+  vrect(b, XN, W, 0, D, 0, H, m.wall);
+  /* Four ceiling lamps on a 2 x 2 grid (6-25). */
+  for (int k = 0; k < 4; k++) of_ceiling_lamp(b, k & 1 ? 4.2 : 1.8, k & 2 ? 3.5 : 1.5, &m);
+  /* Door, whiteboard and picture 1 cm in front of their walls, rug 5 mm above the floor
+   * (26-29). */
+  vrect(b, ZP, 0.01, 3.3, 4.2, 0, 2.1, m.door);
+  vrect(b, ZP, 0.01, 1.1, 2.9, 0.95, 2.05, m.whiteboard);
+  vrect(b, XP, 0.01, 1.3, 2.3, 1.3, 2.0, m.picture);
+  rect(b, YP, v3(0.8, 0.005, 3.2), v3(2.4, 0.005, 4.5), m.rug);
+  /* Desks: A against the blue wall, B in the corner at x = W, z = 0, C free-standing
+   * (30-54, 55-77, 78-105). */
+  of_desk(b, 0, 1.0, 0.75, 2.6, F_XN, &m);
+  of_desk(b, W - 1.6, 0, W, 0.75, F_XP | F_ZN, &m);
+  of_desk(b, 2.2, 2.3, 3.8, 3.05, 0, &m);
+  /* Monitors on A and B (106-115, 116-125), the desk lamp on C (126-145). */
+  of_monitor(b, 0.25, 1.8, XP, &m);
+  of_monitor(b, W - 0.8, 0.25, ZP, &m);
+  of_desk_lamp(b, 2.6, 2.45, &m);
+  /* A chair at each desk, its back away from the desk (146-172, 173-199, 200-226). */
+  of_chair(b, 1.05, 1.8, XP, &m);
+  of_chair(b, W - 0.8, 1.05, ZP, &m);
+  of_chair(b, 3.0, 3.35, ZP, &m);
+  of_bookshelf(b, 3.0, 4.1, &m); /* 227-270 */
+  of_cabinet(b, 0.15, &m);       /* 271-291 */
+  /* From the corner at x = W, z = D, over desk C toward the blue wall and the whiteboard. */
+  set_camera(b->s, v3(5.85, 1.95, 4.85), v3(2.6, 0.8, 1.2), 68);
+}
+
 /* ---------------------------------------------------------------- public */
 
-static const char *const builtin_names[] = {"room", "floor", "museum", "cornell", NULL};
+static const char *const builtin_names[] = {"room", "floor", "museum", "cornell", "office", NULL};
 
 const char *const *hr_scene_builtin_names(void) { return builtin_names; }
 
 hr_status hr_scene_builtin(const char *name, hr_scene **out, hr_err *err) {
   static void (*const builders[])(bld *) = {build_room, build_floor, build_museum,
-                                            build_cornell};
+                                            build_cornell, build_office};
   if (out) *out = NULL;
   int which = -1;
   for (int i = 0; name && builtin_names[i]; i++)
     if (strcmp(name, builtin_names[i]) == 0) which = i;
   if (which < 0)
     return hr_err_set(err, HR_ERR_INVALID,
-                      "unknown scene '%s' (built-in: room, floor, museum, cornell)",
+                      "unknown scene '%s' (built-in: room, floor, museum, cornell, office)",
                       name ? name : "");
   if (!out) return hr_err_set(err, HR_ERR_INVALID, "hr_scene_builtin: 'out' is NULL");
   bld b = {NULL, HR_OK, 0};

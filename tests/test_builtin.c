@@ -1,13 +1,16 @@
 /* test_builtin.c: tests of the built-in scenes (src/builtin.c). Sizes (27 polygons for "room",
- * 280-300 for "floor", 3500-4500 for "museum"), emitters and cameras; well-formed surfaces (finite,
- * positive area, aspect ratio below 10); the room closed (its shell area equals the box area
- * computed here from its dimensions); and orientation, the bug that makes a surface silently
- * invisible: interior points lie in front of every enclosing surface and behind every face of a
- * furniture block, and rays shot in many directions from points known to be in the air (room
- * centres, museum cell centres, the cameras) always hit a surface first from its front side, and
- * in closed scenes always hit something. A small ray/triangle test written here is the
- * independent referee. Also: door openings in "floor" let rays through, unknown names fail with
- * HR_ERR_INVALID and the exact message, the name list, determinism. */
+ * 280-300 for "floor", 3500-4500 for "museum", 292 for "office"), emitters and cameras;
+ * well-formed surfaces (finite, positive area, aspect ratio below 10); the room closed (its
+ * shell area equals the box area computed here from its dimensions); and orientation, the bug
+ * that makes a surface silently invisible: interior points lie in front of every enclosing
+ * surface and behind every face of a furniture block, and rays shot in many directions from
+ * points known to be in the air (room centres, museum cell centres, the cameras) always hit a
+ * surface first from its front side, and in closed scenes always hit something. A small
+ * ray/triangle test written here is the independent referee. Also: door openings in "floor" let
+ * rays through, unknown names fail with HR_ERR_INVALID and the exact message, the name list,
+ * determinism. For "office": its small downward lamps, furniture that stands on the floor,
+ * touches what holds it up and leaves out only faces that lie against something, and no two
+ * coplanar overlapping surfaces. */
 #include "hrad.h"
 #include "testutil.h"
 
@@ -397,20 +400,344 @@ static void test_cornell(void) {
   hr_scene_destroy(&s);
 }
 
+/* "office" as documented in builtin.c: 6 x 3 x 5 m, 292 polygons in a fixed order (the ranges
+ * below). Furniture blocks are convex boxes; 'floor' marks those that stand on the floor. */
+typedef struct of_blk {
+  char what[40];
+  int p0, p1;
+  const char *mat; /* material of every polygon in the block, or NULL (lamps: emitter + housing) */
+  int floor;
+} of_blk;
+
+static void of_add(of_blk *B, int *n, const char *what, int p0, int p1, const char *mat,
+                   int floor) {
+  of_blk *k = &B[(*n)++];
+  snprintf(k->what, sizeof k->what, "%s", what);
+  k->p0 = p0;
+  k->p1 = p1;
+  k->mat = mat;
+  k->floor = floor;
+}
+
+/* Four legs of 4 polygons each from polygon 'p'. */
+static void of_add_legs(of_blk *B, int *n, const char *what, int p) {
+  char w[40];
+  for (int i = 0; i < 4; i++) {
+    snprintf(w, sizeof w, "%s leg %d", what, i);
+    of_add(B, n, w, p + 4 * i, p + 4 * i + 3, "metal", 1);
+  }
+}
+
+/* The blocks of "office" in polygon order; returns their number. */
+static int office_blocks(of_blk *B) {
+  int n = 0;
+  char w[40];
+  for (int k = 0; k < 4; k++) {
+    snprintf(w, sizeof w, "ceiling lamp %d", k);
+    of_add(B, &n, w, 6 + 5 * k, 10 + 5 * k, NULL, 0);
+  }
+  of_add(B, &n, "desk A top", 30, 38, "desk", 0);
+  of_add_legs(B, &n, "desk A", 39);
+  of_add(B, &n, "desk B top", 55, 61, "desk", 0);
+  of_add_legs(B, &n, "desk B", 62);
+  of_add(B, &n, "desk C top", 78, 89, "desk", 0);
+  of_add_legs(B, &n, "desk C", 90);
+  of_add(B, &n, "monitor A case", 106, 111, NULL, 0);
+  of_add(B, &n, "monitor A neck", 112, 115, "monitor", 0);
+  of_add(B, &n, "monitor B case", 116, 121, NULL, 0);
+  of_add(B, &n, "monitor B neck", 122, 125, "monitor", 0);
+  of_add(B, &n, "desk lamp base", 126, 130, "metal", 0);
+  of_add(B, &n, "desk lamp stem", 131, 135, "metal", 0);
+  of_add(B, &n, "desk lamp arm", 136, 139, "metal", 0);
+  of_add(B, &n, "desk lamp head", 140, 145, NULL, 0);
+  static const char *const chairs[3] = {"chair A", "chair B", "chair C"};
+  for (int c = 0; c < 3; c++) {
+    int p = 146 + 27 * c;
+    snprintf(w, sizeof w, "%s seat", chairs[c]);
+    of_add(B, &n, w, p, p + 5, "chair", 0);
+    snprintf(w, sizeof w, "%s back", chairs[c]);
+    of_add(B, &n, w, p + 6, p + 10, "chair", 0);
+    of_add_legs(B, &n, chairs[c], p + 11);
+  }
+  of_add(B, &n, "bookshelf side 0", 227, 233, "bookshelf", 1);
+  of_add(B, &n, "bookshelf side 1", 234, 240, "bookshelf", 1);
+  of_add(B, &n, "bookshelf plinth", 241, 243, "bookshelf", 1);
+  for (int i = 0; i < 3; i++) {
+    snprintf(w, sizeof w, "shelf %d", i);
+    of_add(B, &n, w, 244 + 5 * i, 248 + 5 * i, "bookshelf", 0);
+  }
+  of_add(B, &n, "red books", 259, 262, "books_red", 0);
+  of_add(B, &n, "green books", 263, 266, "books_green", 0);
+  of_add(B, &n, "ochre books", 267, 270, "books_ochre", 0);
+  of_add(B, &n, "filing cabinet", 271, 276, "cabinet", 1);
+  for (int i = 0; i < 3; i++) {
+    snprintf(w, sizeof w, "cabinet handle %d", i);
+    of_add(B, &n, w, 277 + 5 * i, 281 + 5 * i, "metal", 0);
+  }
+  return n;
+}
+
+/* Axis-aligned bounds of polygons [p0, p1]. */
+static void poly_bounds(const hr_scene *s, int p0, int p1, double lo[3], double hi[3]) {
+  for (int a = 0; a < 3; a++) {
+    lo[a] = INFINITY;
+    hi[a] = -INFINITY;
+  }
+  for (int i = 0; i < s->nsurfs; i++) {
+    const hr_surface *f = &s->surfs[i];
+    if (f->poly < p0 || f->poly > p1) continue;
+    for (int k = 0; k < f->nverts; k++) {
+      const double c[3] = {f->v[k].x, f->v[k].y, f->v[k].z};
+      for (int a = 0; a < 3; a++) {
+        lo[a] = fmin(lo[a], c[a]);
+        hi[a] = fmax(hi[a], c[a]);
+      }
+    }
+  }
+}
+
+/* Axis-aligned bounds of one surface. */
+static void surf_bounds(const hr_surface *f, double lo[3], double hi[3]) {
+  for (int a = 0; a < 3; a++) {
+    lo[a] = INFINITY;
+    hi[a] = -INFINITY;
+  }
+  for (int k = 0; k < f->nverts; k++) {
+    const double c[3] = {f->v[k].x, f->v[k].y, f->v[k].z};
+    for (int a = 0; a < 3; a++) {
+      lo[a] = fmin(lo[a], c[a]);
+      hi[a] = fmax(hi[a], c[a]);
+    }
+  }
+}
+
+/* Two boxes touch: they meet in a plane of one axis and overlap (with area) in the others. */
+static int boxes_touch(const double alo[3], const double ahi[3], const double blo[3],
+                       const double bhi[3]) {
+  for (int a = 0; a < 3; a++) {
+    if (!(fabs(ahi[a] - blo[a]) < 1e-9 || fabs(bhi[a] - alo[a]) < 1e-9)) continue;
+    int ok = 1;
+    for (int c = 0; c < 3; c++)
+      if (c != a && fmin(ahi[c], bhi[c]) - fmax(alo[c], blo[c]) < 1e-6) ok = 0;
+    if (ok) return 1;
+  }
+  return 0;
+}
+
+/* No two surfaces lie in one plane and overlap (with area), whichever way they face: for
+ * scenes made only of axis-aligned rectangles, which this checks first. */
+static void check_no_coplanar_overlap(const hr_scene *s, const char *name) {
+  int nonrect = 0, overlaps = 0;
+  double(*lo)[3] = calloc((size_t)s->nsurfs, sizeof *lo);
+  double(*hi)[3] = calloc((size_t)s->nsurfs, sizeof *hi);
+  int *axis = calloc((size_t)s->nsurfs, sizeof *axis);
+  if (!lo || !hi || !axis) abort();
+  for (int i = 0; i < s->nsurfs; i++) {
+    const hr_surface *f = &s->surfs[i];
+    surf_bounds(f, lo[i], hi[i]);
+    const double n[3] = {f->normal.x, f->normal.y, f->normal.z};
+    int a = fabs(n[0]) > 0.5 ? 0 : fabs(n[1]) > 0.5 ? 1 : 2;
+    axis[i] = a;
+    int u = (a + 1) % 3, v = (a + 2) % 3;
+    double span = (hi[i][u] - lo[i][u]) * (hi[i][v] - lo[i][v]);
+    if (f->nverts != 4 || fabs(n[a]) < 1 - 1e-12 || hi[i][a] - lo[i][a] > 1e-12 ||
+        fabs(span - f->area) > 1e-9 * span)
+      nonrect++;
+  }
+  CHECK(nonrect == 0, "%s: %d surfaces are not axis-aligned rectangles", name, nonrect);
+  for (int i = 0; i < s->nsurfs && !nonrect; i++)
+    for (int j = i + 1; j < s->nsurfs; j++) {
+      int a = axis[i], u = (a + 1) % 3, v = (a + 2) % 3;
+      if (axis[j] != a || fabs(lo[i][a] - lo[j][a]) > 1e-9) continue;
+      double ou = fmin(hi[i][u], hi[j][u]) - fmax(lo[i][u], lo[j][u]);
+      double ov = fmin(hi[i][v], hi[j][v]) - fmax(lo[i][v], lo[j][v]);
+      if (ou > 1e-9 && ov > 1e-9 && overlaps++ < 5)
+        fprintf(stderr, "  %s: polys %d (%s) and %d (%s) overlap in one plane (%.4g x %.4g m)\n",
+                name, s->surfs[i].poly, s->mats[s->surfs[i].material].name, s->surfs[j].poly,
+                s->mats[s->surfs[j].material].name, ou, ov);
+    }
+  free(lo);
+  free(hi);
+  free(axis);
+  CHECK(overlaps == 0, "%s: %d pairs of coplanar overlapping surfaces", name, overlaps);
+}
+
+/* Every box face that a block leaves out lies against the shell (the box [0, rhi]) or inside
+ * the opposite face of another block, so no gap opens into the block; and a face is either
+ * all there (its pieces add up to it) or left out. */
+static void check_left_out_faces(const hr_scene *s, const of_blk *B, int nb,
+                                 const double (*lo)[3], const double (*hi)[3],
+                                 const double rhi[3]) {
+  for (int k = 0; k < nb; k++)
+    for (int a = 0; a < 3; a++)
+      for (int sg = -1; sg <= 1; sg += 2) {
+        int u = (a + 1) % 3, v = (a + 2) % 3;
+        double c = sg > 0 ? hi[k][a] : lo[k][a];
+        double full = (hi[k][u] - lo[k][u]) * (hi[k][v] - lo[k][v]), got = 0;
+        for (int i = 0; i < s->nsurfs; i++) {
+          const hr_surface *f = &s->surfs[i];
+          const double n[3] = {f->normal.x, f->normal.y, f->normal.z};
+          const double p[3] = {f->v[0].x, f->v[0].y, f->v[0].z};
+          if (f->poly >= B[k].p0 && f->poly <= B[k].p1 && n[a] * sg > 0.999 &&
+              fabs(p[a] - c) < 1e-9)
+            got += f->area;
+        }
+        if (got > 0) {
+          CHECK(fabs(got - full) < 1e-9 * full, "office %s: face %c%c is %.6g of %.6g m^2",
+                B[k].what, sg > 0 ? '+' : '-', "xyz"[a], got, full);
+          continue;
+        }
+        int covered = sg < 0 ? fabs(c) < 1e-12 : fabs(c - rhi[a]) < 1e-12;
+        for (int j = 0; j < nb && !covered; j++) {
+          if (j == k || fabs((sg > 0 ? lo[j][a] : hi[j][a]) - c) > 1e-9) continue;
+          covered = lo[j][u] <= lo[k][u] + 1e-9 && hi[j][u] >= hi[k][u] - 1e-9 &&
+                    lo[j][v] <= lo[k][v] + 1e-9 && hi[j][v] >= hi[k][v] - 1e-9;
+        }
+        CHECK(covered, "office %s: its %c%c face is left out but lies against nothing",
+              B[k].what, sg > 0 ? '+' : '-', "xyz"[a]);
+      }
+}
+
+static void test_office(void) {
+  const double W = 6.0, H = 3.0, D = 5.0;
+  hr_scene *s = load("office");
+  if (!s) return;
+  int nemit = check_common(s, "office", 10.0);
+  CHECK(s->npolys == 292, "office has %d polygons, want 292", s->npolys);
+  CHECK(s->nsurfs == s->npolys, "office: %d surfaces for %d polygons (all convex quads)",
+        s->nsurfs, s->npolys);
+  CHECK(nemit == 5, "office has %d emitting polygons, want 5 (4 ceiling lamps, a desk lamp)",
+        nemit);
+  check_bounds(s, "office", tv(0, 0, 0), tv(W, H, D), 1e-9);
+  double shell = 0;
+  for (int p = 0; p <= 5; p++) shell += s->poly_area[p];
+  CHECK_REL(shell, 2 * (W * H + W * D + H * D), 1e-12, "office shell area (m^2)");
+  int coloured = 0;
+  for (int i = 0; i < s->nsurfs; i++) {
+    const double *r = s->mats[s->surfs[i].material].rho;
+    if (s->surfs[i].poly <= 5 && r[2] > 2 * r[0]) coloured = 1;
+  }
+  CHECK(coloured, "office: no coloured (blue) wall");
+  CHECK(s->nmats >= 15, "office: only %d materials", s->nmats);
+  for (int m = 0; m < s->nmats; m++)
+    for (int c = 0; c < 3; c++)
+      CHECK(s->mats[m].rho[c] >= 0.1 && s->mats[m].rho[c] <= 0.8,
+            "office: material %s rho %g outside 0.1..0.8", s->mats[m].name, s->mats[m].rho[c]);
+  /* Small bright lamps: every emitter faces down, is at most 0.3 m across, emits 50..100 W/m^2
+   * with rho about 0.8; four hang 4 cm below the ceiling, one (the desk lamp) under 1.2 m. */
+  int ceiling_lamps = 0, desk_lamps = 0;
+  double emit_area = 0;
+  for (int i = 0; i < s->nsurfs; i++) {
+    const hr_surface *f = &s->surfs[i];
+    const hr_material *mt = &s->mats[f->material];
+    if (!(mt->emit[0] > 0 || mt->emit[1] > 0 || mt->emit[2] > 0)) continue;
+    double lo[3], hi[3];
+    poly_bounds(s, f->poly, f->poly, lo, hi);
+    CHECK(f->normal.y < -0.999, "office: emitter poly %d does not face down", f->poly);
+    CHECK(hi[0] - lo[0] <= 0.3 + 1e-9 && hi[2] - lo[2] <= 0.3 + 1e-9,
+          "office: emitter poly %d is %.2f x %.2f m", f->poly, hi[0] - lo[0], hi[2] - lo[2]);
+    for (int c = 0; c < 3; c++)
+      CHECK(mt->emit[c] >= 50 && mt->emit[c] <= 100 && fabs(mt->rho[c] - 0.8) < 0.05,
+            "office: emitter %s E %g rho %g", mt->name, mt->emit[c], mt->rho[c]);
+    if (fabs(lo[1] - (H - 0.04)) < 1e-9) ceiling_lamps++;
+    if (lo[1] > 0.75 && lo[1] < 1.2) desk_lamps++;
+    emit_area += f->area;
+  }
+  CHECK(ceiling_lamps == 4 && desk_lamps == 1, "office: %d ceiling lamps, %d desk lamps",
+        ceiling_lamps, desk_lamps);
+  CHECK(emit_area < 5e-3 * hr_scene_total_area(s), "office: lamps are %.4f m^2 of %.1f m^2",
+        emit_area, hr_scene_total_area(s));
+  printf("  office: emitting area %.4f m^2 (%.3f%% of the total)\n", emit_area,
+         100 * emit_area / hr_scene_total_area(s));
+  /* Shell, emitters and the flat things on walls and floor face the room centre. */
+  hr_vec3 c = tv(W / 2, 2.0, D / 2);
+  check_in_front(s, "office shell", c, 0, 5);
+  check_in_front(s, "office door/whiteboard/picture/rug", c, 26, 29);
+  for (int k = 0; k < 4; k++) check_in_front(s, "office ceiling lamp", c, 6 + 5 * k, 6 + 5 * k);
+  /* Furniture: convex blocks facing outward, each of one material; those on the floor reach
+   * y = 0; and every block touches another block or the shell (nothing floats). */
+  of_blk B[80];
+  int nb = office_blocks(B);
+  double (*lo)[3] = calloc((size_t)nb, sizeof *lo), (*hi)[3] = calloc((size_t)nb, sizeof *hi);
+  int *reach = calloc((size_t)nb, sizeof *reach);
+  if (!lo || !hi || !reach) abort();
+  int covered = 0;
+  for (int k = 0; k < nb; k++) {
+    check_block(s, B[k].what, B[k].p0, B[k].p1);
+    covered += B[k].p1 - B[k].p0 + 1;
+    poly_bounds(s, B[k].p0, B[k].p1, lo[k], hi[k]);
+    for (int i = 0; i < s->nsurfs && B[k].mat; i++)
+      if (s->surfs[i].poly >= B[k].p0 && s->surfs[i].poly <= B[k].p1)
+        CHECK(strcmp(s->mats[s->surfs[i].material].name, B[k].mat) == 0,
+              "office %s: poly %d is %s, want %s", B[k].what, s->surfs[i].poly,
+              s->mats[s->surfs[i].material].name, B[k].mat);
+    if (B[k].floor)
+      CHECK(fabs(lo[k][1]) < 1e-12, "office %s: lowest point at y = %g, not on the floor",
+            B[k].what, lo[k][1]);
+  }
+  /* Everything but the shell (6) and the door, whiteboard, picture and rug (4) is in a block. */
+  CHECK(covered == s->npolys - 10, "office: blocks cover %d polygons, want %d", covered,
+        s->npolys - 10);
+  const double rlo[3] = {0, 0, 0}, rhi[3] = {W, H, D};
+  for (int k = 0; k < nb; k++)
+    for (int a = 0; a < 3; a++)
+      if (fabs(lo[k][a] - rlo[a]) < 1e-9 || fabs(hi[k][a] - rhi[a]) < 1e-9) reach[k] = 1;
+  for (int grew = 1; grew;) {
+    grew = 0;
+    for (int k = 0; k < nb; k++)
+      for (int j = 0; j < nb && !reach[k]; j++)
+        if (reach[j] && boxes_touch(lo[k], hi[k], lo[j], hi[j])) reach[k] = grew = 1;
+  }
+  for (int k = 0; k < nb; k++)
+    CHECK(reach[k], "office %s floats: it touches nothing that reaches the shell", B[k].what);
+  check_left_out_faces(s, B, nb, (const double(*)[3])lo, (const double(*)[3])hi, rhi);
+  free(lo);
+  free(hi);
+  free(reach);
+  check_no_coplanar_overlap(s, "office");
+  /* Closed and front-facing from points in the air: the centre, under the desk C, under a
+   * chair seat, inside a bookshelf compartment, just under a ceiling lamp and under the desk
+   * lamp's head, behind a monitor, near the door, and the camera. */
+  check_closed_from(s, "office centre", c, 2000);
+  check_closed_from(s, "office under desk C", tv(3.0, 0.35, 2.7), 1000);
+  check_closed_from(s, "office under chair A", tv(1.05, 0.2, 1.8), 1000);
+  check_closed_from(s, "office bookshelf", tv(0.2, 0.9, 3.3), 1000);
+  check_closed_from(s, "office under a lamp", tv(1.8, 2.9, 1.5), 1000);
+  check_closed_from(s, "office under the desk lamp", tv(2.6, 0.9, 2.79), 1000);
+  check_closed_from(s, "office behind monitor B", tv(5.2, 1.0, 0.1), 1000);
+  check_closed_from(s, "office by the door", tv(4.0, 0.3, 0.5), 1000);
+  check_closed_from(s, "office camera", s->camera.eye, 1000);
+  /* Deterministic: a second build is identical. */
+  hr_scene *s2 = load("office");
+  if (s2) {
+    int same = s2->nsurfs == s->nsurfs && s2->nmats == s->nmats;
+    for (int i = 0; same && i < s->nsurfs; i++) {
+      same = s->surfs[i].material == s2->surfs[i].material &&
+             s->surfs[i].poly == s2->surfs[i].poly && s->surfs[i].nverts == s2->surfs[i].nverts;
+      for (int k = 0; same && k < s->surfs[i].nverts; k++)
+        same = memcmp(&s->surfs[i].v[k], &s2->surfs[i].v[k], sizeof(hr_vec3)) == 0;
+    }
+    CHECK(same, "office: two builds differ");
+    hr_scene_destroy(&s2);
+  }
+  hr_scene_destroy(&s);
+}
+
 static void test_names_and_errors(void) {
   const char *const *names = hr_scene_builtin_names();
-  const char *want[] = {"room", "floor", "museum", "cornell"};
+  const char *want[] = {"room", "floor", "museum", "cornell", "office"};
   int n = 0;
   while (names && names[n]) n++;
-  CHECK(n == 4, "%d built-in names, want 4", n);
-  for (int i = 0; i < 4 && i < n; i++)
+  CHECK(n == 5, "%d built-in names, want 5", n);
+  for (int i = 0; i < 5 && i < n; i++)
     CHECK(strcmp(names[i], want[i]) == 0, "name %d is '%s', want '%s'", i, names[i], want[i]);
   hr_scene *s = (hr_scene *)&n; /* must be reset to NULL */
   hr_err err = {{0}};
   hr_status st = hr_scene_builtin("nope", &s, &err);
   CHECK(st == HR_ERR_INVALID, "unknown name: status %d", (int)st);
   CHECK(s == NULL, "unknown name: *out not NULL");
-  CHECK(strcmp(err.msg, "unknown scene 'nope' (built-in: room, floor, museum, cornell)") == 0,
+  CHECK(strcmp(err.msg,
+               "unknown scene 'nope' (built-in: room, floor, museum, cornell, office)") == 0,
         "message '%s'", err.msg);
   st = hr_scene_builtin("Room", &s, NULL); /* case matters; a NULL err is fine */
   CHECK(st == HR_ERR_INVALID && s == NULL, "'Room': status %d", (int)st);
@@ -424,5 +751,6 @@ int main(void) {
   test_floor();
   test_cornell();
   test_museum();
+  test_office();
   return t_done("test_builtin");
 }
