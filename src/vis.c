@@ -538,3 +538,30 @@ int hr_blockers_test(const hr_blockers *b, int n, const float *org, const float 
   }
   return left;
 }
+
+/* ------------------------------------------------------------------ closest hit (pt.c) */
+
+int hr_vis_hit(const hr_vis *v, const float org[3], const float dir[3], float tfar, float *t) {
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+  struct RTCRayHit rh;
+  rh.ray.org_x = org[0];
+  rh.ray.org_y = org[1];
+  rh.ray.org_z = org[2];
+  rh.ray.dir_x = dir[0];
+  rh.ray.dir_y = dir[1];
+  rh.ray.dir_z = dir[2];
+  rh.ray.tnear = 0.0f;
+  rh.ray.tfar = tfar;
+  rh.ray.time = 0.0f;
+  rh.ray.mask = 0xFFFFFFFFu;
+  rh.ray.id = 0;
+  rh.ray.flags = 0;
+  rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+  rh.hit.primID = RTC_INVALID_GEOMETRY_ID;
+  rtcIntersect1(v->scene, &ctx, &rh);
+  if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return -1;
+  *t = rh.ray.tfar;
+  return v->tri2surf[rh.hit.primID];
+}

@@ -40,6 +40,12 @@ void hr_vis_segments_cand(const hr_scene *s, const int32_t *cand, int ncand, int
  * skipped surfaces), or -1 when it is unoccluded. */
 int hr_vis_first_hit(const hr_vis *v, const float org[3], const float dst[3]);
 
+/* Closest hit of the ray org + t dir, t in [0, tfar] (Embree, single precision, no skipped
+ * surfaces, either face): returns the surface id and sets '*t' (in units of |dir|), or returns
+ * -1 and leaves '*t' alone when nothing is hit. tfar may be INFINITY. Used by the reference path
+ * tracer (pt.c), whose callers lift ray origins off their surface (hr_vis_lift). */
+int hr_vis_hit(const hr_vis *v, const float org[3], const float dir[3], float tfar, float *t);
+
 /* A small cache of recent blockers (HR_BLK_MAX surfaces, newest first), tested like
  * hr_vis_segments_cand (in single precision, as Embree tests) before a segment goes to Embree. Consecutive pairs from one surface are
  * mostly hidden by the same few walls, so most of their segments stop here. */
