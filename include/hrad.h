@@ -139,16 +139,18 @@ hr_status hr_scene_set_emit(hr_scene *s, const char *name, const double rgb[3], 
 /* ---------------------------------------------------------------- solver (solve.c) */
 
 typedef struct hr_options {
-  double bf_low;      /* final refinement threshold BF_low, relative to max emitted radiosity */
+  double bf_low;      /* final refinement threshold BF_low: the largest error (variation of the
+                         light over the receiver, or from the source's variation) a link may
+                         bring its receiver, relative to the light the receiver gets */
   double bf_start;    /* first BF_e of the multigrid schedule (relative) */
   double bf_factor;   /* BF_e is divided by this each outer step (> 1) */
-  double area_min;    /* A_e, relative to the total scene area */
-  double b_eps;       /* B_e: convergence when max change of B (relative to max E) is below */
+  double area_min;    /* A_e, relative to the total scene area; 0: bf_low / 3 */
+  double b_eps;       /* B_e: convergence when the max change of B, relative to the scene's mean
+                         radiosity, is below */
   double b_max;       /* B_max of section 2.2.4 (relative), > b_eps */
   int relax;          /* section 2.2.4 relaxed inner loop on/off */
   int relax_links;    /* "many new links": relative growth threshold in percent */
   int rays;           /* k: rays per link for the visibility fraction H */
-  int rays_min;       /* fewest rays for links that cannot carry BF_low (rays_min >= rays: all k) */
   uint64_t seed;      /* jitter seed */
   int threads;        /* 0 = all cores */
   int max_iters;      /* safety limit on total iterations */
@@ -220,6 +222,42 @@ typedef struct hr_leaf {
 /* Copies the current leaves (any order stable for a given solution); caller frees *leaves. */
 hr_status hr_solver_leaves(const hr_solver *s, hr_leaf **leaves, int64_t *nleaves);
 const hr_scene *hr_solver_scene(const hr_solver *s);
+
+/* ---------------------------------------------------------------- reference path tracer (pt.c) */
+
+/* An independent Monte Carlo estimate of the same radiosity the solver computes, for checking it:
+ * the slow, obviously correct twin of the whole solver. Same scene model: one-sided diffuse
+ * surfaces; light leaves the front only; a ray that reaches a back face or leaves the scene
+ * carries nothing; B(x) = E(x) + rho(x) * integral over the front hemisphere of B(y)/pi cos dw.
+ * Paths use next-event estimation (an emitting surface picked by area * (E_r+E_g+E_b), a uniform
+ * point on it) and cosine-weighted hemisphere sampling, combined by MIS (power heuristic), and
+ * Russian roulette (unbiased). Random numbers are a counter-based hash of (seed, item, sample),
+ * so results are bit-identical for any thread count. */
+typedef struct hr_pt_options {
+  int64_t paths; /* samples per polygon (hr_pt_polys), >= 1 */
+  uint64_t seed;
+  int threads;   /* 0 = all cores */
+} hr_pt_options;
+
+/* Fills 'o' with the defaults: 10000 paths, seed 1, all cores. */
+void hr_pt_options_default(hr_pt_options *o);
+
+/* Mean radiosity of every input polygon (s->npolys rows of RGB) over o->paths points drawn
+ * uniformly by area on its surfaces, and the standard error of each mean (sqrt of the sample
+ * variance / paths; NaN when paths == 1). 'o' NULL means the defaults; 'stderr_' may be NULL.
+ * HR_ERR_INVALID for bad arguments, HR_ERR_NOMEM, or the ray caster's error. Never prints. */
+hr_status hr_pt_polys(const hr_scene *s, const hr_pt_options *o, double (*mean)[3],
+                      double (*stderr_)[3], hr_err *err);
+
+/* Radiosity image from camera 'cam' (w*h*3 floats, linear, row 0 at the top; the same camera
+ * model and pixel grid as hr_render: pixel (x, y) spans NDC [2x/w-1, 2(x+1)/w-1] and rows run
+ * from NDC y = 1 down). Each pixel is the mean of 'spp' camera rays, stratified and jittered
+ * over the pixel; a ray that first hits a front face gives that point's radiosity estimate,
+ * a back face or a miss gives 0. 'se' (w*h*3, may be NULL) receives each pixel's standard error
+ * as if its samples were independent (stratification makes the true error smaller; NaN when
+ * spp == 1). o->paths is not used. Errors as for hr_pt_polys. */
+hr_status hr_pt_image(const hr_scene *s, const hr_camera *cam, int w, int h, int spp,
+                      const hr_pt_options *o, float *rgb, float *se, hr_err *err);
 
 #ifdef __cplusplus
 }

@@ -47,15 +47,31 @@ static int reserve(hr_solver *s, int64_t need) {
   double(*B)[3] = realloc(s->B, (size_t)nc * sizeof *B);
   if (!B) return 0;
   s->B = B;
+  double(*Bs)[3] = realloc(s->Bs, (size_t)nc * sizeof *Bs);
+  if (!Bs) return 0;
+  s->Bs = Bs;
   double(*G)[3] = realloc(s->G, (size_t)nc * sizeof *G);
   if (!G) return 0;
   s->G = G;
+  double *Gu = realloc(s->Gu, (size_t)nc * sizeof *Gu);
+  if (!Gu) return 0;
+  s->Gu = Gu;
   double(*rho)[3] = realloc(s->rho, (size_t)nc * sizeof *rho);
   if (!rho) return 0;
   s->rho = rho;
   double *rm = realloc(s->rho_max, (size_t)nc * sizeof *rm);
   if (!rm) return 0;
   s->rho_max = rm;
+  double *br = realloc(s->bref, (size_t)nc * sizeof *br);
+  if (!br) return 0;
+  s->bref = br;
+  double *bv = realloc(s->bvar, (size_t)nc * sizeof *bv);
+  if (!bv) return 0;
+  s->bvar = bv;
+  double *op = realloc(s->open, (size_t)nc * sizeof *op);
+  if (!op) return 0;
+  s->open = op;
+
   s->cap_el = nc;
   return 1;
 }
@@ -83,11 +99,15 @@ hr_status hr_elem_init(hr_solver *s) {
     const double *E = sc->mats[sc->surfs[i].material].emit;
     const double *R = sc->mats[sc->surfs[i].material].rho;
     for (int c = 0; c < 3; c++) {
-      s->B[i][c] = E[c];
+      s->B[i][c] = s->Bs[i][c] = E[c];
       s->G[i][c] = 0;
       s->rho[i][c] = R[c];
     }
     s->rho_max[i] = fmax(R[0], fmax(R[1], R[2]));
+    s->bref[i] = 1; /* set by push-pull */
+    s->Gu[i] = 0;
+    s->bvar[i] = 0;
+    s->open[i] = 1; /* hr_elem_open, once the ray caster exists */
   }
   s->nel = sc->nsurfs;
   return HR_OK;
@@ -147,12 +167,36 @@ hr_status hr_elem_subdivide(hr_solver *s, int32_t idx) {
     elem_geometry(s->scene, e);
     for (int c = 0; c < 3; c++) {
       s->B[first + k][c] = s->B[idx][c];
+      s->Bs[first + k][c] = s->Bs[idx][c];
       s->G[first + k][c] = 0;
+      s->Gu[first + k] = 0;
       s->rho[first + k][c] = s->rho[idx][c];
     }
     s->rho_max[first + k] = s->rho_max[idx];
+    s->bref[first + k] = s->bref[idx];
+    s->bvar[first + k] = 0;
+    s->open[first + k] = s->open[idx]; /* hr_elem_open, after the round's subdivisions */
   }
   p->child = first;
   s->nel += 4;
   return HR_OK;
+}
+
+/* Points per side for the open fraction: roots are whole input surfaces, where a box standing on
+ * a floor covers a small part; children are smaller. */
+#define OPEN_M_ROOT 8
+#define OPEN_M 4
+
+void hr_elem_open(hr_solver *s, int64_t lo, int64_t hi) {
+#pragma omp parallel for schedule(dynamic, 64) if (hi - lo > 256)
+  for (int64_t e = lo; e < hi; e++) {
+    /* A child of a wholly open element is wholly open. */
+    if (s->el[e].parent >= 0 && s->open[s->el[e].parent] == 1) {
+      s->open[e] = 1;
+      continue;
+    }
+    const hr_ff_elem g = hr_elem_geom(s, &s->el[e]);
+    const hr_vf_elem ve = {&g, s->el[e].gid, s->el[e].surf};
+    s->open[e] = hr_vf_open(&s->vf, ve, s->el[e].parent < 0 ? OPEN_M_ROOT : OPEN_M);
+  }
 }

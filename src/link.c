@@ -45,96 +45,124 @@ static int pool_reserve(int32_t **pool, int64_t *cap, int64_t need) {
 
 /* ---------------------------------------------------------------- link evaluation */
 
-/* Rays for the visible fraction between elements a and b, whose unoccluded form factors (eq. 2)
- * are fab (a receiving from b) and fba: the full k where the pair can carry a BF of BF_low or
- * more (w = max(rho_a F_ab, rho_b F_ba) >= BF_low, i.e. with a source as bright as the brightest
- * emitter), and proportionally fewer below, down to k_min. H stays unbiased for any count; only
- * its noise grows, on links that carry little energy (docs/design.md, "Rays per link"). The same
- * count for both directions keeps H_ab == H_ba. */
-static int pair_rays(const hr_solver *s, int32_t a, int32_t b, double fab, double fba) {
-  int k = s->opt.rays, kmin = s->opt.rays_min;
-  if (kmin >= k || !(fab > 0)) return k;
-  double w = fab * s->rho_max[a], w2 = fba * s->rho_max[b];
-  w = w > w2 ? w : w2;
-  double kk = ceil(k * w / s->opt.bf_low);
-  return kk >= k ? k : kk > kmin ? (int)kk : kmin;
+/* Rays for the visible fraction of a pair: all k for now (see docs/design.md, "Rays per
+ * link"). */
+static int pair_rays(const hr_solver *s) { return s->opt.rays; }
+
+/* Rays of the decision set (see STREAM_DECIDE) in refinement: half the estimate's. (4 lost
+ * Cornell's partly visible pairs; 8 decided as well as 16 at half the cost.) */
+static int decide_rays(const hr_solver *s) { return s->opt.rays > 1 ? s->opt.rays / 2 : 1; }
+
+static hr_vf_elem vf_elem(const hr_solver *s, int32_t idx, const hr_ff_elem *g) {
+  return (hr_vf_elem){g, s->el[idx].gid, s->el[idx].surf};
 }
 
-/* 1 if some corner of 'b' lies in front of the plane of element 'a'. */
-static int elem_in_front(const hr_solver *s, const hr_elem *a, const hr_elem *b) {
-  hr_vec3 n = s->scene->surfs[a->surf].normal;
-  int nv = s->scene->surfs[b->surf].nverts;
+/* 1 if some corner of 'b' lies in front of the plane of 'a' (by more than a relative
+ * tolerance). */
+static int elem_in_front(const hr_ff_elem *a, const hr_ff_elem *b) {
   double size = sqrt(a->area + b->area);
-  for (int k = 0; k < nv; k++)
-    if (v3_dot(v3_sub(b->p[k], a->c), n) > 1e-9 * size) return 1;
+  for (int k = 0; k < b->nv; k++)
+    if (v3_dot(v3_sub(b->p[k], a->p[0]), a->n) > 1e-9 * size) return 1;
   return 0;
 }
 
-/* Fills F and H of link 'l' (receiver, source and candidate list already set): eq. (2) times H
- * when the centres face each other; when only parts do, the ray-cast point-to-disk form factor
- * over the sampled segments (eq. (2) would give 0 and drop light that does arrive); when no part
- * faces the other, F = H = 0. */
+/* Upper bound of the form factor from receiver r to source j with the cosines bounded by 1:
+ * the refinement oracle's measure for links whose quadrature found nothing although parts of
+ * the elements face each other. */
+static double ff_bound(const hr_ff_elem *r, const hr_ff_elem *j) {
+  hr_vec3 cr = {0, 0, 0}, cj = {0, 0, 0};
+  for (int k = 0; k < r->nv; k++) cr = v3_add(cr, r->p[k]);
+  for (int k = 0; k < j->nv; k++) cj = v3_add(cj, j->p[k]);
+  hr_vec3 d = v3_sub(v3_scale(cj, 1.0 / j->nv), v3_scale(cr, 1.0 / r->nv));
+  return j->area / (M_PI * v3_dot(d, d) + j->area);
+}
+
+/* The oracle's measure of a link (fu: unoccluded form factor, spread: its variation over the
+ * receiver, h: visible fraction from k samples; 'blockers': whether anything may block):
+ *  - the spread of the point form factor over the receiver;
+ *  - where something may block, the uncertainty of the visibility: fu where a shadow boundary
+ *    crosses the link (0 < h < 1), and fu / (k + 1) where all k samples agreed (h = 0 or 1: the
+ *    visible fraction may still be about 1/k away). Without this a link whose samples happened
+ *    to be all blocked would stop refining while its partly visible siblings refine on, and the
+ *    light through partly visible gaps would come out low;
+ *  - a bound where the quadrature saw nothing of a source that parts of the receiver face. */
+static double link_df(const hr_ff_elem *r, const hr_ff_elem *j, double fu, double spread,
+                      double h, int k, int blockers) {
+  double df = spread;
+  if (blockers) {
+    double u = h > 0 && h < 1 ? fu : fu / (k + 1);
+    df = u > df ? u : df;
+  }
+  if (fu == 0 && h > 0) {
+    double b = ff_bound(r, j);
+    df = b > df ? b : df;
+  }
+  return df;
+}
+
+/* The oracle's source measure of a link: how much its light depends on where on the source it
+ * comes from, fu times hr_ff_source_weight, or the whole fu where a shadow boundary may cross
+ * (visibility then weights parts of the source differently; fu / (k + 1) where all k samples
+ * agreed, as in link_df). A link takes its source's mean radiosity; where that radiosity
+ * varies (the floor around a block standing on it is lit, the part under the block is dark),
+ * this measure times the variation is the error the link can make. */
+static double link_ds(const hr_ff_elem *r, const hr_ff_elem *j, double fu, double h, int k,
+                      int blockers) {
+  double ds = fu * hr_ff_source_weight(r, j);
+  if (blockers) {
+    double u = h > 0 && h < 1 ? fu : fu / (k + 1);
+    ds = u > ds ? u : ds;
+  }
+  return ds;
+}
+
+/* Two independent sets of visibility samples per link: refinement decides on one whether the
+ * visibility is settled, and the form factor rests on the other. Deciding and estimating with
+ * the same samples biases the light through partly visible gaps: a link whose samples all
+ * happen to agree stops refining with H = 0 or 1, while its siblings go on (measured on the
+ * Cornell box: parts of the floor's penumbra 5-18% too bright). */
+enum { STREAM_ESTIMATE = 0, STREAM_DECIDE = 1 };
+
+/* The estimate set's visible fraction when the decision set gave 'hd' (k rays). */
+static double estimate_h(const hr_solver *s, hr_vf_elem a, hr_vf_elem b, const int32_t *cand,
+                         int ncand, int k, double hd, hr_blockers *blk, int64_t *rays) {
+  if (ncand == 0) return hd;
+  return hr_vf_pair(&s->vf, a, b, cand, ncand, k, STREAM_ESTIMATE, blk, rays);
+}
+
+/* Fills F, Fu, dF and dS of link 'l' (receiver, source and candidate list already set). */
 static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64_t *rays) {
-  const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
-  double f = hr_ff_unoccluded(s, r, j), h;
-  l->Fu = (float)f;
-  if (f > 0) {
-    int k = l->ncand == 0 ? 0 : pair_rays(s, l->r, l->s, f, hr_ff_unoccluded(s, j, r));
-    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, k, NULL, rays, NULL);
-    f *= h;
-  } else if (elem_in_front(s, r, j) && elem_in_front(s, j, r)) {
-    double fmc[2];
-    h = hr_ff_visibility(s, r, j, pool + l->cand_off, l->ncand, 0, NULL, rays, fmc);
-    f = fmc[0];
-  } else {
-    h = 0;
+  const hr_ff_elem gr = hr_elem_geom(s, &s->el[l->r]), gj = hr_elem_geom(s, &s->el[l->s]);
+  double spread, fu = hr_ff_pair(&gr, &gj, 0, &spread), hd = 0, he = 0;
+  const int k = pair_rays(s), kd = decide_rays(s), nc = l->ncand;
+  if (fu > 0 || (elem_in_front(&gr, &gj) && elem_in_front(&gj, &gr))) {
+    const hr_vf_elem a = vf_elem(s, l->r, &gr), b = vf_elem(s, l->s, &gj);
+    hd = hr_vf_pair(&s->vf, a, b, pool + l->cand_off, nc, kd, STREAM_DECIDE, NULL, rays);
+    he = estimate_h(s, a, b, pool + l->cand_off, nc, k, hd, NULL, rays);
   }
-  l->H = (float)h;
-  l->F = (float)f;
+  l->Fu = (float)fu;
+  l->F = (float)(fu * he);
+  l->dF = (float)link_df(&gr, &gj, fu, spread, hd, kd, l->ncand != 0);
+  l->dS = (float)link_ds(&gr, &gj, fu, hd, kd, l->ncand != 0);
 }
 
-/* Refinement oracle: the largest energy, relative to the brightest emitter, that the link would
- * carry into its receiver (rho_i B_j F_ij per channel). When the elements' centres face away but
- * parts of them may still face each other, the cosines are bounded by 1 so that such a link
- * still refines instead of silently dropping its energy. */
-/* The form factor the refinement oracle uses for link l (see link_bf). */
-static double oracle_f(const hr_solver *s, const hr_link *l) {
-  double f = l->F;
-  if (l->H > 0 && l->H < 1) {
-    /* Partly visible: H rests on k rays and varies across the elements (a shadow boundary
-     * crosses them); refine as if unoccluded, so that visibility is resolved by refinement
-     * instead of by the noise of one coarse estimate. */
-    f = l->Fu > f ? l->Fu : f;
-  }
-  if (f == 0 && l->H > 0) {
-    const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
-    double r2 = v3_dot(v3_sub(j->c, r->c), v3_sub(j->c, r->c));
-    f = j->area / (M_PI * r2 + j->area);
-  }
-  return f;
-}
-
-/* Refinement oracle: the largest energy, relative to the brightest emitter, that the link would
- * carry into its receiver (rho_i B_j F_ij per channel). When the elements' centres face away but
- * parts of them may still face each other, the cosines are bounded by 1 so that such a link
- * still refines instead of silently dropping its energy. */
-static double link_bf(const hr_solver *s, const hr_link *l) {
-  double f = oracle_f(s, l);
-  const double *rho = s->rho[l->r], *b = s->B[l->s];
+/* Refinement oracle (paper 2.2.2: a link whose "BF" is too strong is refined), measured
+ * relative to the receiver, in its two parts:
+ *  - receiver error: the largest variation over the receiver, in any channel, of the radiosity
+ *    the link brings, rho_i B_j dF;
+ *  - source error: rho_i dS times the variation of the source's radiosity over its leaves;
+ * each over the receiver's reference radiosity bref (its reflected radiosity, at least a
+ * fraction of the scene's mean radiosity). */
+static void link_err(const hr_solver *s, const hr_link *l, double *er, double *es) {
+  const double *rho = s->rho[l->r], *b = s->Bs[l->s];
   double m = 0;
   for (int c = 0; c < 3; c++) {
     double e = rho[c] * b[c];
     m = e > m ? e : m;
   }
-  return m * f / s->emax;
-}
-
-/* 1 if some vertex of 'b' lies in front of the plane of 'a' (by more than a relative tolerance). */
-static int in_front(const hr_surface *a, const hr_surface *b) {
-  double size = sqrt(a->area + b->area);
-  for (int k = 0; k < b->nverts; k++)
-    if (v3_dot(v3_sub(b->v[k], a->v[0]), a->normal) > 1e-9 * size) return 1;
-  return 0;
+  const double inv = 1.0 / s->bref[l->r];
+  *er = m * l->dF * inv;
+  *es = s->rho_max[l->r] * s->bvar[l->s] * l->dS * inv;
 }
 
 /* ---------------------------------------------------------------- initial linking */
@@ -146,59 +174,101 @@ typedef struct row {
   int err;
 } row;
 
-/* Facing pairs (i, j[q]) of one row of initial linking waiting for their visible fraction. */
+/* Facing pairs (i, j[q]) of one row of initial linking waiting for their visible fraction:
+ * unoccluded form factors both ways and their spreads over each receiver. */
 typedef struct pending {
   int n, segs;
-  int j[HR_FF_BATCH_PAIRS], k[HR_FF_BATCH_PAIRS];
-  double fij[HR_FF_BATCH_PAIRS], fji[HR_FF_BATCH_PAIRS];
+  int j[HR_VF_BATCH_PAIRS], k[HR_VF_BATCH_PAIRS];
+  hr_ff_elem g[HR_VF_BATCH_PAIRS];
+  double fij[HR_VF_BATCH_PAIRS], fji[HR_VF_BATCH_PAIRS];
+  double sij[HR_VF_BATCH_PAIRS], sji[HR_VF_BATCH_PAIRS];
 } pending;
 
-/* Computes H for the pending pairs of row i (batched where the centres face each other, the
- * rest one by one with the straddle estimate), appends the links of the visible ones in pair
- * order and empties 'pd'. Returns 0 when out of memory.
+/* Appends the two links of pair (i, j) to the row; 0 when out of memory. */
+static int row_push(row *rw, hr_link lij, hr_link lji) {
+  if (rw->nlinks + 2 > rw->cap) {
+    int nc = rw->cap ? rw->cap * 2 : 16;
+    hr_link *l = realloc(rw->links, (size_t)nc * sizeof *l);
+    if (!l) {
+      rw->err = 1;
+      return 0;
+    }
+    rw->links = l;
+    rw->cap = nc;
+  }
+  rw->links[rw->nlinks++] = lij;
+  rw->links[rw->nlinks++] = lji;
+  return 1;
+}
+
+/* Computes H for the pending pairs of row i (batched where every sample counts, the rest one
+ * by one), appends the links of the visible ones in pair order and empties 'pd'. Returns 0 when
+ * out of memory.
  *
  * The k segments of a pair are cast against the whole scene: most pairs of a large scene are
  * hidden from each other, and most initial links are never refined, so a candidate list is
  * built only when a link first splits (see hr_link_refine). A pair all of whose k segments are
  * blocked is taken as mutually invisible. */
-static int init_flush(const hr_solver *s, int i, pending *pd, hr_blockers *blk, row *rw) {
-  const hr_elem *bs[HR_FF_BATCH_PAIRS] = {NULL};
-  int kb[HR_FF_BATCH_PAIRS] = {0}, qb[HR_FF_BATCH_PAIRS], nb = 0;
-  double hb[HR_FF_BATCH_PAIRS], h[HR_FF_BATCH_PAIRS], fmc[HR_FF_BATCH_PAIRS][2];
+static int init_flush(const hr_solver *s, int i, const hr_ff_elem *gi, pending *pd,
+                      hr_blockers *blk, row *rw) {
+  hr_vf_elem bs[HR_VF_BATCH_PAIRS] = {{NULL, 0, 0}};
+  int kb[HR_VF_BATCH_PAIRS] = {0}, qb[HR_VF_BATCH_PAIRS], nb = 0;
+  double hb[HR_VF_BATCH_PAIRS], h[HR_VF_BATCH_PAIRS];
+  const hr_vf_elem ei = vf_elem(s, i, gi);
   for (int q = 0; q < pd->n; q++)
-    if (pd->fij[q] > 0 && pd->k[q] <= HR_FF_BATCH_SEGS) {
-      bs[nb] = &s->el[pd->j[q]];
+    if (pd->k[q] <= HR_VF_BATCH_SEGS) {
+      bs[nb] = vf_elem(s, pd->j[q], &pd->g[q]);
       kb[nb] = pd->k[q];
       qb[nb++] = q;
     }
-  hr_ff_visibility_batch(s, &s->el[i], bs, kb, nb, blk, &rw->rays, hb);
+  hr_vf_batch(&s->vf, ei, bs, kb, nb, STREAM_DECIDE, blk, &rw->rays, hb);
   for (int q = 0; q < pd->n; q++) h[q] = -1;
   for (int r = 0; r < nb; r++) h[qb[r]] = hb[r];
   for (int q = 0; q < pd->n; q++) {
     int j = pd->j[q];
+    const hr_ff_elem *gj = &pd->g[q];
+    const hr_vf_elem ej = vf_elem(s, j, gj);
     if (h[q] < 0)
-      h[q] = hr_ff_visibility(s, &s->el[i], &s->el[j], NULL, -1, pd->k[q], blk, &rw->rays,
-                              pd->fij[q] > 0 ? NULL : fmc[q]);
+      h[q] = hr_vf_pair(&s->vf, ei, ej, NULL, -1, pd->k[q], STREAM_DECIDE, blk, &rw->rays);
     if (h[q] == 0) continue;
-    if (rw->nlinks + 2 > rw->cap) {
-      int nc = rw->cap ? rw->cap * 2 : 16;
-      hr_link *l = realloc(rw->links, (size_t)nc * sizeof *l);
-      if (!l) {
-        rw->err = 1;
-        return 0;
-      }
-      rw->links = l;
-      rw->cap = nc;
-    }
-    double fij = pd->fij[q], fji = pd->fji[q];
-    double Fij = fij > 0 ? fij * h[q] : fmc[q][0], Fji = fji > 0 ? fji * h[q] : fmc[q][1];
-    hr_link lij = {i, j, (float)Fij, (float)h[q], (float)fij, 0, NO_LIST};
-    hr_link lji = {j, i, (float)Fji, (float)h[q], (float)fji, 0, NO_LIST};
-    rw->links[rw->nlinks++] = lij;
-    rw->links[rw->nlinks++] = lji;
+    const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h[q], blk, &rw->rays);
+    const double fij = pd->fij[q], fji = pd->fji[q];
+    hr_link lij = {i, j, (float)(fij * he), (float)fij,
+                   (float)link_df(gi, gj, fij, pd->sij[q], h[q], pd->k[q], 1),
+                   (float)link_ds(gi, gj, fij, h[q], pd->k[q], 1), 0, NO_LIST};
+    hr_link lji = {j, i, (float)(fji * he), (float)fji,
+                   (float)link_df(gj, gi, fji, pd->sji[q], h[q], pd->k[q], 1),
+                   (float)link_ds(gj, gi, fji, h[q], pd->k[q], 1), 0, NO_LIST};
+    if (!row_push(rw, lij, lji)) return 0;
   }
   pd->n = pd->segs = 0;
   return 1;
+}
+
+/* Initial linking of row i: surface i against every later surface that faces it. */
+static void init_row(const hr_solver *s, int i, row *rw) {
+  const hr_scene *sc = s->scene;
+  const hr_ff_elem gi = hr_elem_geom(s, &s->el[i]);
+  hr_blockers blk;
+  hr_blockers_clear(&blk);
+  pending pd;
+  pd.n = pd.segs = 0;
+  for (int j = i + 1; j < sc->nsurfs; j++) {
+    const hr_ff_elem gj = hr_elem_geom(s, &s->el[j]);
+    if (!elem_in_front(&gi, &gj) || !elem_in_front(&gj, &gi)) continue;
+    /* Initial pairs whose decision samples are all blocked get no link at all: they decide with
+     * the full k, since a partly visible pair dropped here loses its light for good. */
+    int k = pair_rays(s);
+    if (pd.n == HR_VF_BATCH_PAIRS || pd.segs + k > HR_VF_BATCH_SEGS) {
+      if (!init_flush(s, i, &gi, &pd, &blk, rw)) return;
+    }
+    int q = pd.n++;
+    pd.j[q] = j, pd.k[q] = k, pd.g[q] = gj;
+    pd.fij[q] = hr_ff_pair(&gi, &gj, 0, &pd.sij[q]);
+    pd.fji[q] = hr_ff_pair(&gj, &gi, 0, &pd.sji[q]);
+    pd.segs += k;
+  }
+  init_flush(s, i, &gi, &pd, &blk, rw);
 }
 
 hr_status hr_link_init(hr_solver *s, hr_err *err) {
@@ -214,33 +284,7 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
   row *rows = calloc((size_t)n, sizeof *rows);
   if (!rows) return hr_err_set(err, HR_ERR_NOMEM, "out of memory in initial linking");
 #pragma omp parallel for schedule(dynamic, 4) if (n > 16)
-  for (int i = 0; i < n; i++) {
-    row *rw = &rows[i];
-    const hr_surface *a = &sc->surfs[i];
-    hr_blockers blk;
-    hr_blockers_clear(&blk);
-    pending pd;
-    pd.n = pd.segs = 0;
-    for (int j = i + 1; j <= n; j++) {
-      if (j < n) {
-        const hr_surface *b = &sc->surfs[j];
-        if (!in_front(a, b) || !in_front(b, a)) continue;
-        /* Eq. (2) where the centres face each other, else the ray-cast estimate (link_eval).
-         * Both directions share the two cosines: fji > 0 exactly when fij > 0. */
-        double fij = hr_ff_unoccluded(s, &s->el[i], &s->el[j]);
-        double fji = fij > 0 ? hr_ff_unoccluded(s, &s->el[j], &s->el[i]) : 0;
-        int k = pair_rays(s, i, j, fij, fji);
-        if (pd.n == HR_FF_BATCH_PAIRS || pd.segs + k > HR_FF_BATCH_SEGS) {
-          if (!init_flush(s, i, &pd, &blk, rw)) break;
-        }
-        pd.j[pd.n] = j, pd.k[pd.n] = k, pd.fij[pd.n] = fij, pd.fji[pd.n] = fji;
-        pd.n++;
-        pd.segs += k;
-      } else if (!init_flush(s, i, &pd, &blk, rw)) {
-        break;
-      }
-    }
-  }
+  for (int i = 0; i < n; i++) init_row(s, i, &rows[i]);
   int64_t nl = 0;
   int failed = 0;
   for (int i = 0; i < n; i++) {
@@ -277,17 +321,21 @@ static int elem_poly(const hr_solver *s, const hr_elem *e, hr_vec3 *p) {
   return n;
 }
 
+/* 1 if element 'e' may be split (above A_e and not at the deepest level). */
+static int splittable(const hr_solver *s, const hr_elem *e) {
+  return e->area > s->area_min && (e->child >= 0 || e->depth < HR_GID_DEPTH);
+}
+
+/* Keep the link, or split its receiver or its source: the side whose error is larger (the
+ * receiver's for a tie), or the other side when that one cannot be split. */
 static uint8_t decide(const hr_solver *s, const hr_link *l, double bf_e) {
-  if (l->H <= 0) return KEEP; /* invisible, or dead (H < 0) */
-  if (link_bf(s, l) <= bf_e) return KEEP;
-  const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
-  /* The paper subdivides the larger patch if its area is above A_e. */
-  if (r->area >= j->area) {
-    if (r->area > s->area_min && (r->child >= 0 || r->depth < HR_GID_DEPTH)) return SPLIT_R;
-  } else {
-    if (j->area > s->area_min && (j->child >= 0 || j->depth < HR_GID_DEPTH)) return SPLIT_S;
-  }
-  return KEEP;
+  if (l->Fu < 0) return KEEP; /* dead: refined away */
+  double er, es;
+  link_err(s, l, &er, &es);
+  if (er <= bf_e && es <= bf_e) return KEEP;
+  const int rs = splittable(s, &s->el[l->r]), ss = splittable(s, &s->el[l->s]);
+  if (er >= es) return rs ? SPLIT_R : ss && es > bf_e ? SPLIT_S : KEEP;
+  return ss ? SPLIT_S : rs && er > bf_e ? SPLIT_R : KEEP;
 }
 
 /* Builds the candidate lists that splitting links (dec != KEEP) do not have yet (NO_LIST):
@@ -344,28 +392,30 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
   int64_t nsplit0 = 0, lo = 0;
   if (s->sorted) {
     /* The sorted links, receiver by receiver, from the compact source and oracle arrays (8
-     * bytes a link instead of the 28 of its record) and an upper bound of BF; only a link whose
-     * bound passes BF_e gets the exact test. */
+     * bytes a link instead of the 32 of its record) and an upper bound of the oracle's errors;
+     * only a link whose bound passes BF_e gets the exact test. */
     float *bup = malloc((size_t)s->nel * sizeof *bup);
     if (!bup) {
       free(dec);
       return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
     }
-    /* Largest channel of B per element, rounded up to float: a small array that stays in
-     * cache while the pass reads the sources at random. */
+    /* Largest channel of B per element, or its leaves' spread if larger, rounded up to float: a
+     * small array that stays in cache while the pass reads the sources at random. */
     for (int64_t e = 0; e < s->nel; e++) {
-      const double *b = s->B[e];
+      const double *b = s->Bs[e];
       double x = b[0] > b[1] ? b[0] : b[1];
       x = x > b[2] ? x : b[2];
+      x = x > s->bvar[e] ? x : s->bvar[e];
       float xf = (float)x;
       bup[e] = (double)xf < x ? nextafterf(xf, INFINITY) : xf;
     }
-    /* rho_max B_max F_up bounds rho_c B_c F from above; the margin covers the rounding of the
-     * products, so the bound never keeps a link that the exact test would split. */
-    const double lim = bf_e * s->emax * (1 - 1e-9);
+    /* rho_max max(B_max, bvar) max(dF, dS)_up bounds both errors of link_err from above; the
+     * margin covers the rounding of the products, so the bound never keeps a link that the
+     * exact test would split. */
+    const double margin = bf_e * (1 - 1e-9);
 #pragma omp parallel for schedule(dynamic, 256) reduction(+ : nsplit0) if (s->nsorted > PAR_MIN)
     for (int64_t e = 0; e < s->nrstart; e++) {
-      const double rm = s->rho_max[e];
+      const double rm = s->rho_max[e], lim = margin * s->bref[e];
       for (int64_t k = s->rstart[e]; k < s->rstart[e + 1]; k++) {
         dec[k] = rm * bup[s->ls[k]] * s->lfo[k] <= lim ? KEEP : decide(s, &s->links[k], bf_e);
         nsplit0 += dec[k] != KEEP;
@@ -401,7 +451,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       hr_link *l = &s->links[i];
       dec[ncur] = dec[i]; /* ncur <= i */
       cur[ncur++] = *l;
-      l->H = -1; /* dead */
+      l->Fu = -1; /* dead */
       l->F = 0;
       if (i < s->nsorted) s->lfo[i] = 0;
     }
@@ -439,6 +489,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       capmark = s->nel;
     }
     memset(mark, 0, (size_t)s->nel);
+    const int64_t nel0 = s->nel;
     int64_t nsplit = 0, nchild_cand = 0, nk = 0;
     for (int64_t i = 0; i < ncur; i++) {
       if (dec[i] == KEEP) {
@@ -453,6 +504,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       slot[i] = nsplit++;
       nchild_cand += 4 * (int64_t)cur[i].ncand;
     }
+    hr_elem_open(s, nel0, s->nel);
     /* Keep: append in order. */
     if (nkeep + nk > capkeep) {
       int64_t nc = capkeep ? capkeep : 1024;
@@ -578,7 +630,7 @@ hr_status hr_link_sort(hr_solver *s) {
   /* Full sort: drop dead links, group by receiver, compact the candidate pool. */
   int64_t n = 0;
   for (int64_t i = 0; i < s->nlinks; i++)
-    if (s->links[i].H >= 0) s->links[n++] = s->links[i];
+    if (s->links[i].Fu >= 0) s->links[n++] = s->links[i];
   s->nlinks = n;
   s->ndead = 0;
   int64_t *st = realloc(s->rstart, (size_t)(s->nel + 1) * sizeof *st);
@@ -632,7 +684,7 @@ hr_status hr_link_sort(hr_solver *s) {
   }
 #pragma omp parallel for schedule(static) if (n > PAR_MIN)
   for (int64_t k = 0; k < n; k++) {
-    double f = out[k].H > 0 ? oracle_f(s, &out[k]) : 0;
+    double f = out[k].Fu >= 0 ? (out[k].dF > out[k].dS ? out[k].dF : out[k].dS) : 0;
     float fu = (float)f;
     if ((double)fu < f) fu = nextafterf(fu, INFINITY);
     s->ls[k] = out[k].s;

@@ -59,9 +59,9 @@ hr_status hr_report_json(const char *path, const hr_solver *s, const hr_options 
   fprintf(f,
           "  \"options\": {\"bf_low\": %g, \"bf_start\": %g, \"bf_factor\": %g, "
           "\"area_min\": %g, \"b_eps\": %g, \"b_max\": %g, \"relax\": %s, \"rays\": %d, "
-          "\"rays_min\": %d, \"seed\": %llu},\n",
+          "\"seed\": %llu},\n",
           o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max,
-          o->relax ? "true" : "false", o->rays, o->rays_min, (unsigned long long)o->seed);
+          o->relax ? "true" : "false", o->rays, (unsigned long long)o->seed);
   fprintf(f,
           "  \"time_s\": {\"init_graph\": %.6f, \"refine\": %.6f, \"gather\": %.6f, "
           "\"push_pull\": %.6f, \"total\": %.6f}\n",

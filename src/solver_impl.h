@@ -9,8 +9,10 @@
 #ifndef HR_SOLVER_IMPL_H
 #define HR_SOLVER_IMPL_H
 
+#include "ff.h"
 #include "hrad.h"
 #include "vis.h"
+#include "visfrac.h"
 
 #include <stdint.h>
 
@@ -36,9 +38,12 @@ typedef struct hr_elem {
 
 typedef struct hr_link {
   int32_t r, s;       /* receiver and source element idx */
-  float F;            /* form factor of eq. (2) times H */
-  float H;            /* visible fraction */
-  float Fu;           /* eq. (2) at the centres, unoccluded (for the refinement oracle) */
+  float F;            /* form factor: unoccluded quadrature times the visible fraction H */
+  float Fu;           /* the unoccluded form factor (quadrature); < 0: dead (refined away) */
+  float dF;           /* how much the received light may vary over the receiver, as a form
+                         factor: the refinement oracle's receiver measure (see link.c) */
+  float dS;           /* how much the received light depends on where on the source it comes
+                         from, as a form factor: the oracle's source measure (see link.c) */
   uint32_t cand_off;  /* candidate blockers: pool[cand_off .. cand_off+ncand) */
   int32_t ncand;
 } hr_link;
@@ -48,17 +53,32 @@ struct hr_solver {
   hr_options opt;
   hr_vis *vis;
   hr_shaft_index *shaft;
-  double emax;        /* largest emitted radiosity: the unit of BF_e and B_e */
+  hr_vf_ctx vf;       /* what the visible-fraction estimator needs (scene, vis, lift, seed) */
+  double emax;        /* largest emitted radiosity */
+  double unit;        /* radiosity unit of B_e and of the oracle's floor: the area-weighted mean
+                         radiosity of the latest solution (largest channel), at least the mean
+                         emitted radiosity */
   double area_total;
   double area_min;    /* A_e in scene units */
-  double lift;        /* offset of ray ends off their surfaces, scene units */
   /* elements */
   hr_elem *el;
   int64_t nel, cap_el;
   double (*B)[3];     /* radiosity per element */
+  double (*Bs)[3];    /* the radiosity it sends, E + (B - E) / open: its open part (hr_vf_open)
+                         reflects what the whole element gathers; links gather this */
   double (*G)[3];     /* gathered (irradiance-like, before rho) per element */
+  double *Gu;         /* gathered without occlusion, largest channel of the sources: sum of
+                         Fu max(B_j), for the oracle's reference radiosity (bref) */
   double (*rho)[3];   /* reflectance per element (its surface's), beside B for the oracle */
   double *rho_max;    /* largest channel of rho per element */
+  double *bref;       /* per element: the radiosity the oracle measures errors against: what
+                         it would reflect with nothing in the way (rho_max times Gu here and at
+                         its ancestors), at least BREF_FLOOR times the radiosity unit; set by
+                         push-pull */
+  double *open;       /* per element: the fraction of its area that light reaches and leaves
+                         (hr_vf_open), estimated when it is created */
+  double *bvar;       /* per element: largest minus smallest radiosity of the leaves below it
+                         (largest channel; 0 for a leaf), from the latest push-pull */
   /* Links. [0, nsorted) are grouped by receiver: rstart[idx]..rstart[idx+1] (rstart has
    * nrstart+1 entries; elements created since have none there). Links refined away in an
    * incremental pass stay in place, dead (H < 0, F = 0), until the next full sort; their
@@ -72,8 +92,8 @@ struct hr_solver {
   int64_t nsorted, ndead;
   int64_t *xstart, *xidx; /* extras by receiver: xidx[xstart[e]..xstart[e+1]) index links */
   int sorted;             /* 0: a full sort is due */
-  /* For the decision pass, per sorted link: its source and the oracle's form factor rounded up
-   * to float (0 for dead links). */
+  /* For the decision pass, per sorted link: its source and max(dF, dS) rounded up to float (0
+   * for dead links). */
   int32_t *ls;
   float *lfo;
   /* counters */
@@ -86,28 +106,19 @@ struct hr_solver {
 /* elem.c */
 hr_status hr_elem_init(hr_solver *s);                  /* one root per surface, idx == surface */
 hr_status hr_elem_subdivide(hr_solver *s, int32_t idx); /* creates 4 children if a leaf */
+/* Estimates the open fraction (hr_vf_open) of elements [lo, hi), in parallel; needs s->vis. */
+void hr_elem_open(hr_solver *s, int64_t lo, int64_t hi);
 
-/* ff.c */
-/* Unoccluded point-to-disk form factor of eq. (2) from receiver r to source j (source area A_j in
- * the denominator); 0 when the elements face away at their centres. */
-double hr_ff_unoccluded(const hr_solver *s, const hr_elem *r, const hr_elem *j);
-/* Visible fraction H between elements a and b with candidate list 'cand' (0 candidates: 1, no
- * rays; ncand < 0: no list, rays against the whole scene). Symmetric: H(a,b) == H(b,a) exactly.
- * Adds the number of rays cast to *rays. Only segments whose ends lie in front of the other
- * element count. If 'fmc' is non-NULL it receives the ray-cast point-to-disk form factors
- * (Wallace et al.) F(a <- b) and F(b <- a) over the same segments, for links whose centres face
- * away (eq. (2) gives 0 there although parts of the elements face each other). */
-double hr_ff_visibility(const hr_solver *s, const hr_elem *a, const hr_elem *b,
-                        const int32_t *cand, int ncand, int k, hr_blockers *blk, int64_t *rays,
-                        double fmc[2]);
-/* Batches of hr_ff_visibility_batch: at most this many pairs and segments (k <= 4096 each, so
- * a pair with more rays than HR_FF_BATCH_SEGS goes alone through hr_ff_visibility). */
-#define HR_FF_BATCH_PAIRS 32
-#define HR_FF_BATCH_SEGS 256
-void hr_ff_visibility_batch(const hr_solver *s, const hr_elem *a, const hr_elem *const *bs,
-                            const int *ks, int np, hr_blockers *blk, int64_t *rays, double *h);
-/* Counter-based hash of (seed, a, b, i): the only source of randomness. */
-uint64_t hr_hash4(uint64_t seed, uint64_t a, uint64_t b, uint64_t i);
+/* The geometry of element 'e' for the form-factor and visibility kernels. */
+static inline hr_ff_elem hr_elem_geom(const hr_solver *s, const hr_elem *e) {
+  const hr_surface *f = &s->scene->surfs[e->surf];
+  hr_ff_elem g;
+  g.nv = f->nverts;
+  for (int k = 0; k < 4; k++) g.p[k] = e->p[k];
+  g.n = f->normal;
+  g.area = e->area;
+  return g;
+}
 
 /* link.c */
 hr_status hr_link_init(hr_solver *s, hr_err *err);          /* paper 2.2.1 */

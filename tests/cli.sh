@@ -41,14 +41,14 @@ fi
 
 # ---------------------------------------------------------------- golden counts for room
 # Fixed options; a change here means the algorithm changed: update deliberately.
-opts="--bf-low 1e-3 --area-min 1e-4 --rays 16 --rays-min 4 --seed 1 --bf-start 0.05 --bf-factor 4"
+opts="--bf-low 3e-3 --area-min 1e-3 --rays 16 --seed 1 --bf-start 0.05 --bf-factor 4"
 if "$hrad" --quiet $opts -o "$t/r1" --threads 1 room; then
   el=$(json "$t/r1/stats.json" elements); li=$(json "$t/r1/stats.json" links)
   it=$(json "$t/r1/stats.json" iterations)
   echo "     room: elements $el links $li iterations $it"
-  [ "$el" = "${GOLD_ELEMENTS:-4983}" ] && ok "room elements golden ($el)" || bad "room elements $el (golden ${GOLD_ELEMENTS:-4983})"
-  [ "$li" = "${GOLD_LINKS:-45852}" ] && ok "room links golden ($li)" || bad "room links $li (golden ${GOLD_LINKS:-45852})"
-  [ "$it" = "${GOLD_ITERS:-25}" ] && ok "room iterations golden ($it)" || bad "room iterations $it (golden ${GOLD_ITERS:-25})"
+  [ "$el" = "${GOLD_ELEMENTS:-1872}" ] && ok "room elements golden ($el)" || bad "room elements $el (golden ${GOLD_ELEMENTS:-1872})"
+  [ "$li" = "${GOLD_LINKS:-340689}" ] && ok "room links golden ($li)" || bad "room links $li (golden ${GOLD_LINKS:-340689})"
+  [ "$it" = "${GOLD_ITERS:-39}" ] && ok "room iterations golden ($it)" || bad "room iterations $it (golden ${GOLD_ITERS:-39})"
   for n in 2 3 4; do
     "$hrad" --quiet $opts -o "$t/r$n" --threads $n room
     cmp -s "$t/r1/surfaces.csv" "$t/r$n/surfaces.csv" && ok "room surfaces.csv identical with $n threads" \
@@ -78,6 +78,20 @@ if "$hrad" --quiet --snapshots --size 160x120 -o "$t/s" cornell; then
   cmp -s "$last" "$t/s/cornell.png" && ok "final image equals the last snapshot" || bad "final image differs from last snapshot"
 else
   bad "hrad --snapshots failed"
+fi
+
+# ---------------------------------------------------------------- --verify, --verify-image
+if "$hrad" --quiet -o "$t/v" --size 64x48 --verify 2000 --verify-image 4 cornell 2> "$t/verr.txt"; then
+  [ "$(head -1 "$t/v/verify.csv")" = "id,area,material,emitter,hrad_r,hrad_g,hrad_b,ref_r,ref_g,ref_b,se_r,se_g,se_b,rel_err" ] \
+    && ok "verify.csv header" || bad "verify.csv header: $(head -1 "$t/v/verify.csv")"
+  [ $(($(wc -l < "$t/v/verify.csv") - 1)) = "$(json "$t/v/stats.json" surfaces)" ] \
+    && ok "verify.csv: one row per input polygon" || bad "verify.csv rows"
+  grep -q "^verify: area-weighted RMS error" "$t/verr.txt" && ok "verify summary: $(grep '^verify: area' "$t/verr.txt")" \
+    || bad "no verify summary: $(cat "$t/verr.txt")"
+  grep -q "^verify-image: mean relative per-pixel error" "$t/verr.txt" && [ -s "$t/v/cornell-reference.png" ] \
+    && ok "verify-image wrote cornell-reference.png and its error line" || bad "verify-image: $(cat "$t/verr.txt")"
+else
+  bad "hrad --verify failed: $(cat "$t/verr.txt")"
 fi
 
 # ---------------------------------------------------------------- bad input
@@ -115,6 +129,8 @@ expect 1 "^hrad: unknown scene 'nosuch'" nosuch
 expect 2 "unknown option '--frobnicate'" --frobnicate room
 expect 2 "--rays: not a number" --rays many room
 expect 1 "rays must be in" --rays 0 room
+expect 2 "--verify: expected a whole number" --verify 0 room
+expect 2 "--verify-image: expected a whole number" --verify-image 2.5 room
 expect 1 "no material named 'nosuch'" --emit nosuch=1,1,1 room
 # Degenerate polygons are skipped with a warning naming the line; the run succeeds.
 if "$hrad" -o "$t/degen-out" "$t/degen.obj" 2> "$t/err.txt" >/dev/null && grep -q "degen.obj:15: degenerate" "$t/err.txt"; then

@@ -1,0 +1,52 @@
+/* ff.h: form-factor kernels (paper 1.2: the F_ij of the links), on element geometry alone.
+ *
+ * These functions know nothing of the solver: they take two elements as polygons and return
+ * numbers, so that tests can hold them against the exact reference (ff_ref.c) and a distributed
+ * solver can call them on any process. Internal API. */
+#ifndef HR_FF_H
+#define HR_FF_H
+
+#include "hrad.h"
+
+/* An element as the kernels see it: a planar convex polygon, counter-clockwise seen from its
+ * front, which alone emits and receives light. */
+typedef struct hr_ff_elem {
+  int nv;       /* 3 or 4 */
+  hr_vec3 p[4]; /* corners (p[3] unused for triangles) */
+  hr_vec3 n;    /* unit front normal */
+  double area;
+} hr_ff_elem;
+
+/* Differential-area-to-polygon form factor from the point x (unit normal nx) to the front of
+ * polygon 's', unoccluded, exact (Lambert's contour integral over the part of 's' in front of
+ * x's tangent plane). 0 when x is not in front of 's'. This function can't fail. */
+double hr_ff_point(hr_vec3 x, hr_vec3 nx, const hr_ff_elem *s);
+
+/* Quadrature order on the receiver (1 = one point, 2 = 2x2 or 3 points, 3 = 3x3 or 6 points)
+ * that makes the unoccluded polygon-to-polygon form factor of hr_ff_elem_pair accurate for
+ * receiver 'r' and source 's'; chosen from their separation relative to the receiver's size. */
+int hr_ff_order(const hr_ff_elem *r, const hr_ff_elem *s);
+
+/* Quadrature points of order 'order' (1..3) on element 'e': up to 9 points 'x' with weights 'w'
+ * summing to 1 (area measure). Returns the number of points. */
+int hr_ff_points(const hr_ff_elem *e, int order, hr_vec3 *x, double *w);
+
+/* Unoccluded form factor F(r <- s): the area mean over the receiver of hr_ff_point, by the
+ * quadrature rule of order 'order' (0: hr_ff_order). '*spread' (may be NULL) receives an
+ * estimate of how much the point form factor varies over the receiver (largest minus smallest):
+ * from the quadrature points, extrapolated to the element's sides, or for one point from the
+ * point-to-disk estimate at the receiver's corners. This function can't fail. */
+double hr_ff_pair(const hr_ff_elem *r, const hr_ff_elem *s, int order, double *spread);
+
+/* How much the light a receiver 'r' gets from source 's' depends on where on 's' it comes from,
+ * as a factor in (0, 1] on the unoccluded form factor: 1 where 's' reaches behind the plane of
+ * 'r' or lies within its own size of it, else size / clearance. A link uses the mean radiosity
+ * of its source; this factor times the variation of the source's radiosity bounds the error
+ * that makes (refinement splits the source when it is large). This function can't fail. */
+double hr_ff_source_weight(const hr_ff_elem *r, const hr_ff_elem *s);
+
+/* The paper's eq. (2) without H: the point-to-disk estimate from the receiver's vertex centroid,
+ * cos_i cos_j A_j / (pi r^2 + A_j), 0 when the centres face away. Kept for comparison. */
+double hr_ff_disk(const hr_ff_elem *r, const hr_ff_elem *s);
+
+#endif
