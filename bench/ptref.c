@@ -1,5 +1,6 @@
-/* ptref.c: a path-traced reference of every polygon of a scene, written as CSV for the accuracy
- * benchmarks (bench/accuracy.sh): id,area,emitter,ref_r,ref_g,ref_b,se_r,se_g,se_b.
+/* ptref.c: a path-traced reference of every solved polygon of a scene, written as CSV for the
+ * accuracy benchmarks: id,area,emitter,ref_r,ref_g,ref_b,se_r,se_g,se_b (id: the row of
+ * surfaces.csv).
  *   build/bench/ptref SCENE PATHS OUT.csv [SEED]
  * SCENE is a built-in name or an .obj path. All cores; prints the time taken to stderr. */
 #include "hrad.h"
@@ -53,7 +54,8 @@ int main(int argc, char **argv) {
         const double *e = s->mats[s->surfs[i].material].emit;
         em |= e[0] > 0 || e[1] > 0 || e[2] > 0;
       }
-    fprintf(f, "%d,%.9g,%d,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g\n", p, s->poly_area[p], em, mean[p][0],
+    fprintf(f, "%d,%.9g,%d,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g\n", hr_scene_poly_input(s, p),
+            s->poly_area[p], em, mean[p][0],
             mean[p][1], mean[p][2], se[p][0], se[p][1], se[p][2]);
   }
   fclose(f);

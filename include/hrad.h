@@ -78,14 +78,28 @@ typedef struct hr_camera {
   double fov_deg; /* vertical field of view */
 } hr_camera;
 
+/* What became of one input polygon (an OBJ face, a built-in polygon), in input order. */
+typedef enum {
+  HR_INPUT_SOLVED = 0,   /* became kept polygon 'poly' */
+  HR_INPUT_DUPLICATE,    /* repeats kept polygon 'poly' (same positions, same side): skipped, and
+                            reported with that polygon's radiosity */
+  HR_INPUT_DEGENERATE    /* no area: skipped, 'poly' is -1 */
+} hr_input_kind;
+typedef struct hr_input {
+  int poly;              /* index of the kept polygon (row of hr_solver_poly_radiosity) or -1 */
+  hr_input_kind kind;
+} hr_input;
+
 typedef struct hr_scene {
   char *name;          /* "room", or the OBJ's base name without extension */
   hr_material *mats;
   int nmats, cap_mats;
   hr_surface *surfs;
   int nsurfs, cap_surfs;
-  int npolys;          /* number of input polygons (>= 1 surface each) */
+  int npolys;          /* number of kept polygons (>= 1 surface each) */
   double *poly_area;   /* [npolys] */
+  hr_input *inputs;    /* every input polygon in input order, kept or skipped (surfaces.csv) */
+  int ninputs, cap_inputs;
   int has_camera;
   hr_camera camera;
 } hr_scene;
@@ -109,9 +123,14 @@ typedef enum {
  * given material. A planar convex quad stays one surface; a non-planar or non-convex quad is
  * split into two triangles; polygons with more than 4 vertices are fan-split into triangles
  * (degenerate fan triangles dropped). All surfaces created get the same 'poly' index.
- * Coordinates must be finite (HR_ERR_INVALID otherwise). '*res' tells what happened. */
+ * Coordinates must be finite (HR_ERR_INVALID otherwise). '*res' tells what happened; every call
+ * that returns HR_OK records one input polygon (s->inputs). */
 hr_status hr_scene_add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
                                hr_poly_result *res);
+/* Records an input polygon skipped as a duplicate of kept polygon 'poly'. */
+hr_status hr_scene_add_duplicate(hr_scene *s, int poly);
+/* The input row of kept polygon 'poly' (its first input polygon), or -1. */
+int hr_scene_poly_input(const hr_scene *s, int poly);
 /* Total area of all surfaces, largest emitted radiosity over surfaces and channels. */
 double hr_scene_total_area(const hr_scene *s);
 double hr_scene_max_emit(const hr_scene *s);
@@ -144,7 +163,7 @@ typedef struct hr_options {
                          bring its receiver, relative to the light the receiver gets */
   double bf_start;    /* first BF_e of the multigrid schedule (relative) */
   double bf_factor;   /* BF_e is divided by this each outer step (> 1) */
-  double area_min;    /* A_e, relative to the total scene area; 0: bf_low / 3 */
+  double area_min;    /* A_e, relative to the total scene area; 0: equal to bf_low */
   double b_eps;       /* B_e: convergence when the max change of B, relative to the scene's mean
                          radiosity, is below */
   double b_max;       /* B_max of section 2.2.4 (relative), > b_eps */

@@ -45,6 +45,7 @@ static int pool_reserve(int32_t **pool, int64_t *cap, int64_t need) {
 
 /* ---------------------------------------------------------------- link evaluation */
 
+
 /* Rays for the visible fraction of a pair: all k for now (see docs/design.md, "Rays per
  * link"). */
 static int pair_rays(const hr_solver *s) { return s->opt.rays; }
@@ -77,23 +78,17 @@ static double ff_bound(const hr_ff_elem *r, const hr_ff_elem *j) {
   return j->area / (M_PI * v3_dot(d, d) + j->area);
 }
 
-/* The oracle's measure of a link (fu: unoccluded form factor, spread: its variation over the
- * receiver, h: visible fraction from k samples; 'blockers': whether anything may block):
+/* The oracle's receiver measure of a link (fu: unoccluded form factor, spread: its variation
+ * over the receiver, hd: visible fraction from the decision samples):
  *  - the spread of the point form factor over the receiver;
- *  - where something may block, the uncertainty of the visibility: fu where a shadow boundary
- *    crosses the link (0 < h < 1), and fu / (k + 1) where all k samples agreed (h = 0 or 1: the
- *    visible fraction may still be about 1/k away). Without this a link whose samples happened
- *    to be all blocked would stop refining while its partly visible siblings refine on, and the
- *    light through partly visible gaps would come out low;
+ *  - the whole fu where the decision samples found a shadow boundary (0 < hd < 1): visibility
+ *    then varies over the receiver, which refinement resolves;
  *  - a bound where the quadrature saw nothing of a source that parts of the receiver face. */
 static double link_df(const hr_ff_elem *r, const hr_ff_elem *j, double fu, double spread,
-                      double h, int k, int blockers) {
+                      double hd) {
   double df = spread;
-  if (blockers) {
-    double u = h > 0 && h < 1 ? fu : fu / (k + 1);
-    df = u > df ? u : df;
-  }
-  if (fu == 0 && h > 0) {
+  if (hd > 0 && hd < 1 && fu > df) df = fu;
+  if (fu == 0 && hd > 0) {
     double b = ff_bound(r, j);
     df = b > df ? b : df;
   }
@@ -101,18 +96,13 @@ static double link_df(const hr_ff_elem *r, const hr_ff_elem *j, double fu, doubl
 }
 
 /* The oracle's source measure of a link: how much its light depends on where on the source it
- * comes from, fu times hr_ff_source_weight, or the whole fu where a shadow boundary may cross
- * (visibility then weights parts of the source differently; fu / (k + 1) where all k samples
- * agreed, as in link_df). A link takes its source's mean radiosity; where that radiosity
- * varies (the floor around a block standing on it is lit, the part under the block is dark),
- * this measure times the variation is the error the link can make. */
-static double link_ds(const hr_ff_elem *r, const hr_ff_elem *j, double fu, double h, int k,
-                      int blockers) {
+ * comes from, fu times hr_ff_source_weight, or the whole fu across a shadow boundary (visibility
+ * then weights parts of the source differently). A link takes its source's mean radiosity;
+ * where that radiosity varies (the floor around a block standing on it is lit, the part in the
+ * block's shadow dark), this measure times the variation bounds the error the link makes. */
+static double link_ds(const hr_ff_elem *r, const hr_ff_elem *j, double fu, double hd) {
   double ds = fu * hr_ff_source_weight(r, j);
-  if (blockers) {
-    double u = h > 0 && h < 1 ? fu : fu / (k + 1);
-    ds = u > ds ? u : ds;
-  }
+  if (hd > 0 && hd < 1 && fu > ds) ds = fu;
   return ds;
 }
 
@@ -142,8 +132,8 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
   }
   l->Fu = (float)fu;
   l->F = (float)(fu * he);
-  l->dF = (float)link_df(&gr, &gj, fu, spread, hd, kd, l->ncand != 0);
-  l->dS = (float)link_ds(&gr, &gj, fu, hd, kd, l->ncand != 0);
+  l->dF = (float)link_df(&gr, &gj, fu, spread, hd);
+  l->dS = (float)link_ds(&gr, &gj, fu, hd);
 }
 
 /* Refinement oracle (paper 2.2.2: a link whose "BF" is too strong is refined), measured
@@ -234,11 +224,11 @@ static int init_flush(const hr_solver *s, int i, const hr_ff_elem *gi, pending *
     const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h[q], blk, &rw->rays);
     const double fij = pd->fij[q], fji = pd->fji[q];
     hr_link lij = {i, j, (float)(fij * he), (float)fij,
-                   (float)link_df(gi, gj, fij, pd->sij[q], h[q], pd->k[q], 1),
-                   (float)link_ds(gi, gj, fij, h[q], pd->k[q], 1), 0, NO_LIST};
+                   (float)link_df(gi, gj, fij, pd->sij[q], h[q]),
+                   (float)link_ds(gi, gj, fij, h[q]), 0, NO_LIST};
     hr_link lji = {j, i, (float)(fji * he), (float)fji,
-                   (float)link_df(gj, gi, fji, pd->sji[q], h[q], pd->k[q], 1),
-                   (float)link_ds(gj, gi, fji, h[q], pd->k[q], 1), 0, NO_LIST};
+                   (float)link_df(gj, gi, fji, pd->sji[q], h[q]),
+                   (float)link_ds(gj, gi, fji, h[q]), 0, NO_LIST};
     if (!row_push(rw, lij, lji)) return 0;
   }
   pd->n = pd->segs = 0;

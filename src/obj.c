@@ -90,6 +90,7 @@ typedef struct face_rec {
   size_t off, n; /* positions rpos[off .. off+n) */
   hr_vec3 nrm;   /* Newell normal (not normalised) */
   long line;
+  int poly;      /* the kept polygon it became */
 } face_rec;
 
 /* Iterator over the logical lines of a mutable NUL-terminated buffer. */
@@ -525,10 +526,10 @@ static int face_key(obj_ctx *c, size_t n, size_t *m, uint64_t *hash) {
   return 1;
 }
 
-/* The line of an earlier polygon with the same positions (c->sorted[0..m)) facing along 'nrm',
- * or 0. */
-static long find_duplicate(const obj_ctx *c, size_t m, uint64_t hash, hr_vec3 nrm) {
-  if (c->cap_rtab == 0) return 0;
+/* The record of an earlier polygon with the same positions (c->sorted[0..m)) facing along 'nrm',
+ * or NULL. */
+static const face_rec *find_duplicate(const obj_ctx *c, size_t m, uint64_t hash, hr_vec3 nrm) {
+  if (c->cap_rtab == 0) return NULL;
   size_t mask = c->cap_rtab - 1;
   for (size_t i = (size_t)hash & mask; c->rtab[i] != SIZE_MAX; i = (i + 1) & mask) {
     const face_rec *r = &c->recs[c->rtab[i]];
@@ -536,13 +537,14 @@ static long find_duplicate(const obj_ctx *c, size_t m, uint64_t hash, hr_vec3 nr
     if (r->nrm.x * nrm.x + r->nrm.y * nrm.y + r->nrm.z * nrm.z <= 0) continue;
     size_t j = 0;
     while (j < m && cmp_pos(&c->rpos[r->off + j], &c->sorted[j]) == 0) j++;
-    if (j == m) return r->line;
+    if (j == m) return r;
   }
-  return 0;
+  return NULL;
 }
 
-/* Records the polygon just added (c->sorted[0..m), 'hash', 'nrm', 'line'); 0 on NOMEM. */
-static int record_face(obj_ctx *c, size_t m, uint64_t hash, hr_vec3 nrm, long line) {
+/* Records the polygon just added (c->sorted[0..m), 'hash', 'nrm', 'line', kept polygon 'poly');
+ * 0 on NOMEM. */
+static int record_face(obj_ctx *c, size_t m, uint64_t hash, hr_vec3 nrm, long line, int poly) {
   if (!grow((void **)&c->recs, &c->cap_recs, c->nrecs + 1, sizeof *c->recs) ||
       !grow((void **)&c->rpos, &c->cap_rpos, c->nrpos + m, sizeof *c->rpos))
     return 0;
@@ -566,6 +568,7 @@ static int record_face(obj_ctx *c, size_t m, uint64_t hash, hr_vec3 nrm, long li
   r->n = m;
   r->nrm = nrm;
   r->line = line;
+  r->poly = poly;
   memcpy(&c->rpos[c->nrpos], c->sorted, m * sizeof *c->rpos);
   c->nrpos += m;
   size_t i = (size_t)hash & (c->cap_rtab - 1);
@@ -614,10 +617,12 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
   if (!face_key(c, n, &m, &hash))
     return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
   hr_vec3 nrm = v3_newell(c->face, (int)n);
-  long dup = find_duplicate(c, m, hash, nrm);
-  if (dup > 0) {
+  const face_rec *dup = find_duplicate(c, m, hash, nrm);
+  if (dup) {
     hr_log_warn(c->log, "%s:%ld: duplicate of the polygon on line %ld; skipped", c->path, line,
-                dup);
+                dup->line);
+    if (hr_scene_add_duplicate(c->s, dup->poly) != HR_OK)
+      return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
     return HR_OK;
   }
   hr_poly_result res;
@@ -629,7 +634,7 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
   else if (res == HR_POLY_NONPLANAR)
     return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: non-planar polygon with %zu vertices", c->path,
                       line, n);
-  else if (!record_face(c, m, hash, nrm, line))
+  else if (!record_face(c, m, hash, nrm, line, c->s->npolys - 1))
     return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
   return HR_OK;
 }

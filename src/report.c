@@ -24,11 +24,21 @@ hr_status hr_report_csv(const char *path, const hr_solver *s, hr_err *err) {
   hr_status st = open_out(path, &f, err);
   if (st != HR_OK) return st;
   const hr_scene *sc = hr_solver_scene(s);
-  fprintf(f, "id,area,r,g,b\n");
-  for (int p = 0; p < sc->npolys; p++) {
-    double b[3];
-    hr_solver_poly_radiosity(s, p, b);
-    fprintf(f, "%d,%.9g,%.9g,%.9g,%.9g\n", p, sc->poly_area[p], b[0], b[1], b[2]);
+  fprintf(f, "id,area,r,g,b,status\n");
+  for (int i = 0; i < sc->ninputs; i++) {
+    const hr_input *in = &sc->inputs[i];
+    double b[3] = {0, 0, 0}, area = 0;
+    if (in->poly >= 0) {
+      hr_solver_poly_radiosity(s, in->poly, b);
+      area = sc->poly_area[in->poly];
+    }
+    fprintf(f, "%d,%.9g,%.9g,%.9g,%.9g,", i, area, b[0], b[1], b[2]);
+    if (in->kind == HR_INPUT_SOLVED)
+      fprintf(f, "solved\n");
+    else if (in->kind == HR_INPUT_DUPLICATE)
+      fprintf(f, "duplicate:%d\n", hr_scene_poly_input(sc, in->poly));
+    else
+      fprintf(f, "degenerate\n");
   }
   return close_out(path, f, err);
 }
@@ -44,6 +54,7 @@ hr_status hr_report_json(const char *path, const hr_solver *s, const hr_options 
   fprintf(f, "{\n");
   fprintf(f, "  \"scene\": \"%s\",\n", sc->name);
   fprintf(f, "  \"surfaces\": %d,\n", t.npolys);
+  fprintf(f, "  \"input_polygons\": %d,\n", sc->ninputs);
   fprintf(f, "  \"split_surfaces\": %d,\n", t.nsurfaces);
   fprintf(f, "  \"elements\": %lld,\n", (long long)t.elements);
   fprintf(f, "  \"elements_all\": %lld,\n", (long long)t.elements_all);

@@ -50,6 +50,7 @@ void hr_scene_destroy(hr_scene **ps) {
   free(s->mats);
   free(s->surfs);
   free(s->poly_area);
+  free(s->inputs);
   free(s->name);
   free(s);
   *ps = NULL;
@@ -144,8 +145,38 @@ static int is_convex(const hr_vec3 *v, int n, hr_vec3 nrm) {
   return 1;
 }
 
+/* Appends an input record; 0 when out of memory. */
+static int push_input(hr_scene *s, int poly, hr_input_kind kind) {
+  if (!grow((void **)&s->inputs, &s->cap_inputs, s->ninputs + 1, sizeof *s->inputs)) return 0;
+  s->inputs[s->ninputs++] = (hr_input){poly, kind};
+  return 1;
+}
+
+hr_status hr_scene_add_duplicate(hr_scene *s, int poly) {
+  if (poly < 0 || poly >= s->npolys) return HR_ERR_INVALID;
+  return push_input(s, poly, HR_INPUT_DUPLICATE) ? HR_OK : HR_ERR_NOMEM;
+}
+
+int hr_scene_poly_input(const hr_scene *s, int poly) {
+  for (int i = 0; i < s->ninputs; i++)
+    if (s->inputs[i].kind == HR_INPUT_SOLVED && s->inputs[i].poly == poly) return i;
+  return -1;
+}
+
+static hr_status add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
+                             hr_poly_result *res);
+
 hr_status hr_scene_add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
                                hr_poly_result *res) {
+  hr_status st = add_polygon(s, v, n, material, res);
+  if (st != HR_OK) return st;
+  int ok = *res == HR_POLY_ADDED ? push_input(s, s->npolys - 1, HR_INPUT_SOLVED)
+                                 : push_input(s, -1, HR_INPUT_DEGENERATE);
+  return ok ? HR_OK : HR_ERR_NOMEM;
+}
+
+static hr_status add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
+                             hr_poly_result *res) {
   *res = HR_POLY_DEGENERATE;
   if (n < 3 || material < 0 || material >= s->nmats) return HR_ERR_INVALID;
   for (int i = 0; i < n; i++)

@@ -24,10 +24,10 @@ double hr_now(void) {
 
 void hr_options_default(hr_options *o) {
   memset(o, 0, sizeof *o);
-  o->bf_low = 3e-3;
+  o->bf_low = 1e-3;
   o->bf_start = 0.05;
   o->bf_factor = 4.0;
-  o->area_min = 0; /* BF_low / AREA_PER_BF */
+  o->area_min = 0; /* follows bf_low */
   o->b_eps = 1e-4;
   o->b_max = 2e-3;
   o->relax = 1;
@@ -50,11 +50,10 @@ static double emitted_mean(const hr_scene *sc, double area) {
   return x / area;
 }
 
-/* A_e follows BF_low unless given (--area-min): one setting moves both the accuracy of the links
- * and the finest mesh. Measured on the Cornell box, where every element reaches A_e, against a
- * path-traced reference: BF_low 3e-3 with A_e 1e-3 gives 0.9% area-weighted RMS error in 0.4 s;
- * a finer A_e at that BF_low costs 5x the time for 0.3% less error. */
-#define AREA_PER_BF 3.0
+/* A_e (relative) equals BF_low unless given (--area-min): one setting moves both the accuracy of
+ * the links and the finest mesh. Measured on the Cornell box against a path-traced reference
+ * (area-weighted RMS error, time on 2 cores): BF_low = A_e = 1e-2: 3.6%, 0.03 s; 3e-3: 1.1%,
+ * 0.1 s; 1e-3: 0.43%, 0.7 s; 3e-4: 0.25%, 4.3 s (BENCHMARKS.md). */
 
 static hr_status check_options(const hr_options *o, hr_err *err) {
   if (!(o->bf_low > 0)) return hr_err_set(err, HR_ERR_INVALID, "--bf-low must be > 0");
@@ -62,7 +61,7 @@ static hr_status check_options(const hr_options *o, hr_err *err) {
     return hr_err_set(err, HR_ERR_INVALID, "--bf-start must be >= --bf-low");
   if (!(o->bf_factor > 1)) return hr_err_set(err, HR_ERR_INVALID, "--bf-factor must be > 1");
   if (!(o->area_min >= 0 && o->area_min < 1))
-    return hr_err_set(err, HR_ERR_INVALID, "--area-min must be in [0, 1) (0: BF_low / 3)");
+    return hr_err_set(err, HR_ERR_INVALID, "--area-min must be in [0, 1) (0: BF_low)");
   if (!(o->b_eps > 0)) return hr_err_set(err, HR_ERR_INVALID, "--b-eps must be > 0");
   if (!(o->b_max >= o->b_eps)) return hr_err_set(err, HR_ERR_INVALID, "--b-max must be >= --b-eps");
   if (o->rays < 1 || o->rays > 4096)
@@ -94,7 +93,7 @@ hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solv
   s->opt = o;
   s->emax = emax;
   s->area_total = hr_scene_total_area(scene);
-  s->area_min = (o.area_min > 0 ? o.area_min : o.bf_low / AREA_PER_BF) * s->area_total;
+  s->area_min = (o.area_min > 0 ? o.area_min : o.bf_low) * s->area_total;
   s->vf = (hr_vf_ctx){scene, NULL, hr_vis_lift(scene), o.seed};
   s->unit = emitted_mean(scene, s->area_total);
   s->threads = o.threads > 0 ? o.threads : omp_get_num_procs();

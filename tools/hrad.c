@@ -86,7 +86,8 @@ static void usage(void) {
       "                       (default %g; smaller is more accurate and slower)\n"
       "  --bf-start X         first BF_e of the multigrid schedule (default %g)\n"
       "  --bf-factor X        BF_e is divided by X per level (default %g)\n"
-      "  --area-min X         minimum element area A_e (default BF_low / 3)\n"
+      "  --area-min X         minimum element area A_e, relative to the total area\n"
+      "                       (default: equal to BF_low)\n"
       "  --b-eps X            convergence: max change of B below X (default %g)\n"
       "  --b-max X            B_max of the relaxed inner loop (default %g)\n"
       "  --no-relax           rigid inner loop (paper Figure 3) instead of section 2.2.4\n"
@@ -389,7 +390,7 @@ static void write_verify_csv(const cli *c, const vrow *rows) {
              "rel_err\n");
   for (int p = 0; p < c->scene->npolys; p++) {
     const vrow *r = &rows[p];
-    fprintf(f, "%d,%.9g,", p, c->scene->poly_area[p]);
+    fprintf(f, "%d,%.9g,", hr_scene_poly_input(c->scene, p), c->scene->poly_area[p]);
     csv_field(f, mat_name(c->scene, r->mat));
     fprintf(f, ",%d,%.9g,%.9g,%.9g,%.9g,%.9g,%.9g,%.6g,%.6g,%.6g,%.6g\n", r->emitter, r->hrad[0],
             r->hrad[1], r->hrad[2], r->ref[0], r->ref[1], r->ref[2], r->se[0], r->se[1], r->se[2],
@@ -407,7 +408,8 @@ static void print_verify_table(const hr_scene *sc, const vrow *rows, int64_t pat
                   "reference r, g, b (+- 95%%)                  rel.err\n");
   for (int p = 0; p < sc->npolys; p++) {
     const vrow *r = &rows[p];
-    fprintf(stderr, "verify: %4d %-16.16s %9.4g  %8.4g %8.4g %8.4g  ", p, mat_name(sc, r->mat),
+    fprintf(stderr, "verify: %4d %-16.16s %9.4g  %8.4g %8.4g %8.4g  ", hr_scene_poly_input(sc, p),
+            mat_name(sc, r->mat),
             sc->poly_area[p], r->hrad[0], r->hrad[1], r->hrad[2]);
     for (int k = 0; k < 3; k++) fprintf(stderr, " %8.4g+-%-7.2g", r->ref[k], 1.96 * r->se[k]);
     if (isnan(r->rel))
@@ -443,7 +445,8 @@ static void print_verify_summary(const hr_scene *sc, const vrow *rows, double se
   fprintf(stderr,
           "verify: area-weighted RMS error %.2f%% over %d non-emitting polygons, worst %.2f%% "
           "(polygon %d, %s); reference noise %.2f%%; path tracer %.1f s (%.3g paths/s)\n",
-          100 * sqrt(se2 / sa), cnt, 100 * worst, wp, mat_name(sc, rows[wp].mat),
+          100 * sqrt(se2 / sa), cnt, 100 * worst, hr_scene_poly_input(sc, wp),
+          mat_name(sc, rows[wp].mat),
           100 * sqrt(sn2 / sa), secs, rate);
 }
 
