@@ -378,7 +378,14 @@ static void test_degenerate(void) {
   CHECK(st == HR_OK, "status %d: %s", st, err.msg);
   CHECK(lc.n == 1 && lc.ndegen == 1, "%d warnings, %d degenerate", lc.n, lc.ndegen);
   CHECK(count_msgs(&lc, "degen.obj:7: degenerate polygon skipped") == 1, "message '%s'", lc.msg[0]);
-  if (s) CHECK(s->npolys == 2 && s->nsurfs == 2, "npolys %d nsurfs %d", s->npolys, s->nsurfs);
+  if (s) {
+    CHECK(s->npolys == 2 && s->nsurfs == 2, "npolys %d nsurfs %d", s->npolys, s->nsurfs);
+    /* the skipped face keeps its row (surfaces.csv: area 0, status degenerate) */
+    CHECK(s->ninputs == 3 && s->inputs[1].kind == HR_INPUT_DEGENERATE && s->inputs[1].poly == -1 &&
+              s->inputs[2].poly == 1,
+          "%d input rows; row 1 kind %d poly %d", s->ninputs, s->ninputs > 1 ? (int)s->inputs[1].kind : -1,
+          s->ninputs > 1 ? s->inputs[1].poly : -9);
+  }
   hr_scene_destroy(&s);
 
   /* only degenerate faces: no polygons */
@@ -588,6 +595,19 @@ static void test_duplicates(void) {
           "nsurfs %d", s->nsurfs);
     CHECK(NEAR(hr_scene_total_area(s), 1 + 1 + 0.5 + 0.5, 1e-12), "area %g",
           hr_scene_total_area(s));
+    /* One input row per face, in order: faces 9, 11, 14, 17 are kept polygons 0-3; the
+     * duplicates point at their twins (surfaces.csv reports them with the twin's radiosity). */
+    const hr_input want_in[8] = {{0, HR_INPUT_SOLVED},    {0, HR_INPUT_DUPLICATE},
+                                 {1, HR_INPUT_SOLVED},    {0, HR_INPUT_DUPLICATE},
+                                 {2, HR_INPUT_SOLVED},    {2, HR_INPUT_DUPLICATE},
+                                 {1, HR_INPUT_DUPLICATE}, {3, HR_INPUT_SOLVED}};
+    CHECK(s->ninputs == 8, "%d input rows, want 8", s->ninputs);
+    for (int i = 0; i < 8 && i < s->ninputs; i++)
+      CHECK(s->inputs[i].poly == want_in[i].poly && s->inputs[i].kind == want_in[i].kind,
+            "input %d: poly %d kind %d, want %d %d", i, s->inputs[i].poly, (int)s->inputs[i].kind,
+            want_in[i].poly, (int)want_in[i].kind);
+    CHECK(hr_scene_poly_input(s, 2) == 4, "polygon 2 is input row %d, want 4",
+          hr_scene_poly_input(s, 2));
   }
   hr_scene_destroy(&s);
   /* the same from memory */
