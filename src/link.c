@@ -164,14 +164,11 @@ typedef struct row {
   int err;
 } row;
 
-/* Facing pairs (i, j[q]) of one row of initial linking waiting for their visible fraction:
- * unoccluded form factors both ways and their spreads over each receiver. */
+/* Facing pairs (i, j[q]) of one row of initial linking waiting for their visible fraction. */
 typedef struct pending {
   int n, segs;
   int j[HR_VF_BATCH_PAIRS], k[HR_VF_BATCH_PAIRS];
   hr_ff_elem g[HR_VF_BATCH_PAIRS];
-  double fij[HR_VF_BATCH_PAIRS], fji[HR_VF_BATCH_PAIRS];
-  double sij[HR_VF_BATCH_PAIRS], sji[HR_VF_BATCH_PAIRS];
 } pending;
 
 /* Appends the two links of pair (i, j) to the row; 0 when out of memory. */
@@ -222,12 +219,15 @@ static int init_flush(const hr_solver *s, int i, const hr_ff_elem *gi, pending *
       h[q] = hr_vf_pair(&s->vf, ei, ej, NULL, -1, pd->k[q], STREAM_DECIDE, blk, &rw->rays);
     if (h[q] == 0) continue;
     const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h[q], blk, &rw->rays);
-    const double fij = pd->fij[q], fji = pd->fji[q];
+    /* The form factors only now: most facing pairs of a large scene are hidden (museum: 8.2 M
+     * of 9.2 M), and their quadrature would be wasted. */
+    double sij, sji;
+    const double fij = hr_ff_pair(gi, gj, 0, &sij), fji = hr_ff_pair(gj, gi, 0, &sji);
     hr_link lij = {i, j, (float)(fij * he), (float)fij,
-                   (float)link_df(gi, gj, fij, pd->sij[q], h[q]),
+                   (float)link_df(gi, gj, fij, sij, h[q]),
                    (float)link_ds(gi, gj, fij, h[q]), 0, NO_LIST};
     hr_link lji = {j, i, (float)(fji * he), (float)fji,
-                   (float)link_df(gj, gi, fji, pd->sji[q], h[q]),
+                   (float)link_df(gj, gi, fji, sji, h[q]),
                    (float)link_ds(gj, gi, fji, h[q]), 0, NO_LIST};
     if (!row_push(rw, lij, lji)) return 0;
   }
@@ -254,8 +254,6 @@ static void init_row(const hr_solver *s, int i, row *rw) {
     }
     int q = pd.n++;
     pd.j[q] = j, pd.k[q] = k, pd.g[q] = gj;
-    pd.fij[q] = hr_ff_pair(&gi, &gj, 0, &pd.sij[q]);
-    pd.fji[q] = hr_ff_pair(&gj, &gi, 0, &pd.sji[q]);
     pd.segs += k;
   }
   init_flush(s, i, &gi, &pd, &blk, rw);
