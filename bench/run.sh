@@ -350,7 +350,7 @@ else
       echo "push-pull,push_pull_all,$pp"
       echo "solve,hr_solver_run,$solve"
       echo "program,PROGRAM TOTALS (incl. scene build and writing the outputs),$total"
-      for f in hr_shaft_filter hr_ff_visibility hr_vis_segments_cand hr_vis_segments write_pictures; do
+      for f in hr_shaft_filter hr_vf_pair hr_ff_pair hr_vis_segments_cand hr_vis_segments write_pictures; do
         echo "  (detail),$f,$(ir "$f")"
       done
     } >"$CG"
