@@ -166,7 +166,7 @@ typedef struct hr_options {
   double area_min;    /* A_e, relative to the total scene area; 0: equal to bf_low */
   double b_eps;       /* B_e: convergence when the max change of B, relative to the scene's mean
                          radiosity, is below */
-  double b_max;       /* B_max of section 2.2.4 (relative), > b_eps */
+  double b_max;       /* B_max of section 2.2.4 (relative like b_eps), > b_eps */
   int relax;          /* section 2.2.4 relaxed inner loop on/off */
   int relax_links;    /* "many new links": relative growth threshold in percent */
   int rays;           /* k: rays per link for the visibility fraction H */
@@ -187,7 +187,7 @@ typedef struct hr_iter_info {
   double bf_e;       /* current BF_e (relative) */
   int64_t elements;  /* leaf elements */
   int64_t links;
-  double max_change; /* relative to max E */
+  double max_change; /* relative to the scene's mean radiosity */
   double elapsed_s;
 } hr_iter_info;
 /* Called after each push-pull; return non-zero to stop. */

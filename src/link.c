@@ -1,6 +1,8 @@
 /* link.c: the link graph. Initial linking of every pair of mutually facing surfaces with a
- * shaft-culled candidate blocker list (paper 2.2.1, step {1} of Figure 3) and BF refinement of
- * links (paper 2.2.2, steps {7..13}).
+ * shaft-culled candidate blocker list (paper 2.2.1, step {1} of Figure 3) and refinement of links
+ * (paper 2.2.2, steps {7..13}) by an error oracle relative to each receiver's light (link_err;
+ * docs/design.md, "The refinement oracle"). A link's form factor comes from the kernels of ff.c
+ * and visfrac.c, which see element geometry only.
  *
  * Refinement runs in rounds so that it is parallel and independent of scheduling: in a round
  * every active link decides (keep / split receiver / split source) from the current state only;
@@ -45,9 +47,7 @@ static int pool_reserve(int32_t **pool, int64_t *cap, int64_t need) {
 
 /* ---------------------------------------------------------------- link evaluation */
 
-
-/* Rays for the visible fraction of a pair: all k for now (see docs/design.md, "Rays per
- * link"). */
+/* Rays for the visible fraction of a pair (docs/design.md, "Rays per link"). */
 static int pair_rays(const hr_solver *s) { return s->opt.rays; }
 
 /* Rays of the decision set (see STREAM_DECIDE) in refinement: half the estimate's. (4 lost

@@ -91,7 +91,6 @@ hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solv
   if (!s) return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
   s->scene = scene;
   s->opt = o;
-  s->emax = emax;
   s->area_total = hr_scene_total_area(scene);
   s->area_min = (o.area_min > 0 ? o.area_min : o.bf_low) * s->area_total;
   s->vf = (hr_vf_ctx){scene, NULL, hr_vis_lift(scene), o.seed};

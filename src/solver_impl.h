@@ -54,7 +54,6 @@ struct hr_solver {
   hr_vis *vis;
   hr_shaft_index *shaft;
   hr_vf_ctx vf;       /* what the visible-fraction estimator needs (scene, vis, lift, seed) */
-  double emax;        /* largest emitted radiosity */
   double unit;        /* radiosity unit of B_e and of the oracle's floor: the area-weighted mean
                          radiosity of the latest solution (largest channel), at least the mean
                          emitted radiosity */
