@@ -230,3 +230,48 @@ double hr_ff_disk(const hr_ff_elem *r, const hr_ff_elem *s) {
   if (ci <= 0 || cj <= 0) return 0;
   return ci * cj * s->area / (M_PI * r2 + s->area);
 }
+
+/* The four children of element 'e' (elem.c's subdivision: edge midpoints, and the centre of a
+ * quad), as polygons with e's normal. */
+static void children4(const hr_ff_elem *e, hr_ff_elem *c) {
+  const hr_vec3 *p = e->p;
+  for (int k = 0; k < 4; k++) {
+    c[k].nv = e->nv;
+    c[k].n = e->n;
+  }
+  if (e->nv == 4) {
+    hr_vec3 m01 = v3_lerp(p[0], p[1], .5), m12 = v3_lerp(p[1], p[2], .5),
+            m23 = v3_lerp(p[2], p[3], .5), m30 = v3_lerp(p[3], p[0], .5),
+            mc = v3_lerp(m01, m23, .5);
+    const hr_vec3 q[4][4] = {{p[0], m01, mc, m30}, {m01, p[1], m12, mc},
+                             {mc, m12, p[2], m23}, {m30, mc, m23, p[3]}};
+    for (int k = 0; k < 4; k++) {
+      for (int j = 0; j < 4; j++) c[k].p[j] = q[k][j];
+      c[k].area = 0.5 * v3_len(v3_newell(q[k], 4));
+    }
+  } else {
+    hr_vec3 m01 = v3_lerp(p[0], p[1], .5), m12 = v3_lerp(p[1], p[2], .5),
+            m20 = v3_lerp(p[2], p[0], .5);
+    const hr_vec3 t[4][3] = {{p[0], m01, m20}, {m01, p[1], m12}, {m20, m12, p[2]},
+                             {m12, m20, m01}};
+    for (int k = 0; k < 4; k++) {
+      for (int j = 0; j < 3; j++) c[k].p[j] = t[k][j];
+      c[k].p[3] = t[k][2];
+      c[k].area = 0.25 * e->area;
+    }
+  }
+}
+
+double hr_ff_pair_shares(const hr_ff_elem *r, const hr_ff_elem *s, int order, float share[4]) {
+  if (order <= 0) order = hr_ff_order(r, s);
+  hr_ff_elem c[4];
+  children4(s, c);
+  hr_vec3 x[9];
+  double w[9], fc[4] = {0, 0, 0, 0};
+  int n = hr_ff_points(r, order, x, w);
+  for (int k = 0; k < n; k++)
+    for (int q = 0; q < 4; q++) fc[q] += w[k] * hr_ff_point(x[k], r->n, &c[q]);
+  double f = fc[0] + fc[1] + fc[2] + fc[3];
+  for (int q = 0; q < 4; q++) share[q] = f > 0 ? (float)(fc[q] / f) : -1.0f;
+  return f;
+}

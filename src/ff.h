@@ -45,6 +45,10 @@ double hr_ff_pair(const hr_ff_elem *r, const hr_ff_elem *s, int order, double *s
  * that makes (refinement splits the source when it is large). This function can't fail. */
 double hr_ff_source_weight(const hr_ff_elem *r, const hr_ff_elem *s);
 
+/* The unoccluded form factor as hr_ff_pair, and how it divides among the four children of the
+ * source (elem.c's subdivision), share[0..3] summing to 1 (all -1 when it is 0). */
+double hr_ff_pair_shares(const hr_ff_elem *r, const hr_ff_elem *s, int order, float share[4]);
+
 /* The paper's eq. (2) without H: the point-to-disk estimate from the receiver's vertex centroid,
  * cos_i cos_j A_j / (pi r^2 + A_j), 0 when the centres face away. Kept for comparison. */
 double hr_ff_disk(const hr_ff_elem *r, const hr_ff_elem *s);

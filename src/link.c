@@ -120,6 +120,21 @@ static double estimate_h(const hr_solver *s, hr_vf_elem a, hr_vf_elem b, const i
   return hr_vf_pair(&s->vf, a, b, cand, ncand, k, STREAM_ESTIMATE, blk, rays);
 }
 
+/* Source shares (hr_link.w): how the light of a link from source j into receiver r divides
+ * among j's four children, from the exact kernel at r's centre. Only for links that all their
+ * decision samples see ('visible'): where a shadow crosses, the shares would depend on
+ * visibility, and the source term refines the link instead. A link with shares gathers the
+ * children's radiosities once they exist, so a source need not be split for its links to see
+ * how its radiosity varies at the next level (Cornell box, BF_low 1e-3: 0.43% -> 0.30% with a
+ * quarter fewer links; 3e-4: 0.25% -> 0.16%). */
+static void source_shares(const hr_ff_elem *r, const hr_ff_elem *j, int visible, float w[4]) {
+  if (visible) {
+    hr_ff_pair_shares(r, j, 1, w);
+  } else {
+    for (int q = 0; q < 4; q++) w[q] = -1;
+  }
+}
+
 /* Fills F, Fu, dF and dS of link 'l' (receiver, source and candidate list already set). */
 static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64_t *rays) {
   const hr_ff_elem gr = hr_elem_geom(s, &s->el[l->r]), gj = hr_elem_geom(s, &s->el[l->s]);
@@ -130,10 +145,21 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
     hd = hr_vf_pair(&s->vf, a, b, pool + l->cand_off, nc, kd, STREAM_DECIDE, NULL, rays);
     he = estimate_h(s, a, b, pool + l->cand_off, nc, k, hd, NULL, rays);
   }
+  source_shares(&gr, &gj, nc == 0 || hd == 1, l->w);
   l->Fu = (float)fu;
   l->F = (float)(fu * he);
   l->dF = (float)link_df(&gr, &gj, fu, spread, hd);
   l->dS = (float)link_ds(&gr, &gj, fu, hd);
+}
+
+/* The variation of the source's radiosity that a link does not see: within its children where
+ * it gathers them by shares, else within the source. */
+static double source_var(const hr_solver *s, const hr_link *l) {
+  const int32_t c = s->el[l->s].child;
+  if (c < 0 || !(l->w[0] >= 0)) return s->bvar[l->s];
+  double v = 0;
+  for (int k = 0; k < 4; k++) v = s->bvar[c + k] > v ? s->bvar[c + k] : v;
+  return v;
 }
 
 /* Refinement oracle (paper 2.2.2: a link whose "BF" is too strong is refined), measured
@@ -152,7 +178,7 @@ static void link_err(const hr_solver *s, const hr_link *l, double *er, double *e
   }
   const double inv = 1.0 / s->bref[l->r];
   *er = m * l->dF * inv;
-  *es = s->rho_max[l->r] * s->bvar[l->s] * l->dS * inv;
+  *es = s->rho_max[l->r] * source_var(s, l) * l->dS * inv;
 }
 
 /* ---------------------------------------------------------------- initial linking */
@@ -223,12 +249,14 @@ static int init_flush(const hr_solver *s, int i, const hr_ff_elem *gi, pending *
      * of 9.2 M), and their quadrature would be wasted. */
     double sij, sji;
     const double fij = hr_ff_pair(gi, gj, 0, &sij), fji = hr_ff_pair(gj, gi, 0, &sji);
-    hr_link lij = {i, j, (float)(fij * he), (float)fij,
-                   (float)link_df(gi, gj, fij, sij, h[q]),
-                   (float)link_ds(gi, gj, fij, h[q]), 0, NO_LIST};
-    hr_link lji = {j, i, (float)(fji * he), (float)fji,
-                   (float)link_df(gj, gi, fji, sji, h[q]),
-                   (float)link_ds(gj, gi, fji, h[q]), 0, NO_LIST};
+    hr_link lij = {.r = i, .s = j, .F = (float)(fij * he), .Fu = (float)fij,
+                   .dF = (float)link_df(gi, gj, fij, sij, h[q]),
+                   .dS = (float)link_ds(gi, gj, fij, h[q]), .cand_off = 0, .ncand = NO_LIST};
+    hr_link lji = {.r = j, .s = i, .F = (float)(fji * he), .Fu = (float)fji,
+                   .dF = (float)link_df(gj, gi, fji, sji, h[q]),
+                   .dS = (float)link_ds(gj, gi, fji, h[q]), .cand_off = 0, .ncand = NO_LIST};
+    source_shares(gi, gj, h[q] == 1, lij.w);
+    source_shares(gj, gi, h[q] == 1, lji.w);
     if (!row_push(rw, lij, lji)) return 0;
   }
   pd->n = pd->segs = 0;

@@ -145,6 +145,15 @@ static inline double max3(const double *v) {
 static inline void gather_link(const hr_solver *s, const hr_link *l, double *g0, double *g1,
                                double *g2, double *gu) {
   const double *b = s->Bs[l->s];
+  double bw[3];
+  const int32_t c = s->el[l->s].child;
+  if (c >= 0 && l->w[0] >= 0) {
+    /* Source shares: the children's radiosities, weighted as the link sees them. */
+    const double(*bc)[3] = s->Bs + c;
+    for (int k = 0; k < 3; k++)
+      bw[k] = l->w[0] * bc[0][k] + l->w[1] * bc[1][k] + l->w[2] * bc[2][k] + l->w[3] * bc[3][k];
+    b = bw;
+  }
   const double f = l->F;
   *g0 += f * b[0];
   *g1 += f * b[1];

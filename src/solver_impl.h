@@ -44,6 +44,10 @@ typedef struct hr_link {
                          factor: the refinement oracle's receiver measure (see link.c) */
   float dS;           /* how much the received light depends on where on the source it comes
                          from, as a form factor: the oracle's source measure (see link.c) */
+  float w[4];         /* source shares: how the link's light divides among the four children of
+                         its source (w[0] < 0: none); once the source has children, the link
+                         gathers their radiosities with these weights instead of the source's
+                         mean (link.c, source_shares) */
   uint32_t cand_off;  /* candidate blockers: pool[cand_off .. cand_off+ncand) */
   int32_t ncand;
 } hr_link;
