@@ -1,7 +1,8 @@
 /* ptref.c: a path-traced reference of every solved polygon of a scene, written as CSV for the
  * accuracy benchmarks: id,area,emitter,ref_r,ref_g,ref_b,se_r,se_g,se_b (id: the row of
  * surfaces.csv).
- *   build/bench/ptref SCENE PATHS OUT.csv [SEED]
+ *   build/bench/ptref SCENE PATHS OUT.csv [SEED [NAME=R,G,B ...]]
+ * (NAME=R,G,B: make material NAME emit, like hrad --emit)
  * SCENE is a built-in name or an .obj path. All cores; prints the time taken to stderr. */
 #include "hrad.h"
 
@@ -28,6 +29,22 @@ int main(int argc, char **argv) {
   if (st != HR_OK) {
     fprintf(stderr, "ptref: %s\n", err.msg);
     return 1;
+  }
+  for (int a = 5; a < argc; a++) {
+    char name[256];
+    double rgb[3];
+    const char *eq = strrchr(argv[a], '=');
+    if (!eq || eq - argv[a] >= (long)sizeof name ||
+        sscanf(eq + 1, "%lf,%lf,%lf", &rgb[0], &rgb[1], &rgb[2]) != 3) {
+      fprintf(stderr, "ptref: expected NAME=R,G,B, got '%s'\n", argv[a]);
+      return 2;
+    }
+    memcpy(name, argv[a], (size_t)(eq - argv[a]));
+    name[eq - argv[a]] = 0;
+    if (hr_scene_set_emit(s, name, rgb, &err) != HR_OK) {
+      fprintf(stderr, "ptref: %s\n", err.msg);
+      return 1;
+    }
   }
   hr_pt_options o;
   hr_pt_options_default(&o);

@@ -23,7 +23,8 @@ typedef enum {
   HR_ERR_INVALID,   /* bad values: NaN, out of range, bad option */
   HR_ERR_NOMEM,     /* allocation failed */
   HR_ERR_NO_EMITTER,/* scene has nothing that emits light */
-  HR_ERR_TOO_BIG    /* refused: work would exceed a stated limit */
+  HR_ERR_TOO_BIG,   /* refused: work would exceed a stated limit */
+  HR_ERR_UNPHYSICAL /* the solution became non-finite or broke the physical bound E/(1-rho) */
 } hr_status;
 
 typedef struct hr_err {
@@ -148,6 +149,14 @@ hr_status hr_scene_parse_obj(const char *buf, size_t len, const char *path, cons
                              hr_scene **out, hr_err *err);
 /* Reads the file at 'path' and parses it. */
 hr_status hr_scene_load_obj(const char *path, const hr_log *log, hr_scene **out, hr_err *err);
+/* Like hr_scene_parse_obj, but never touches the disk: every `mtllib` statement reads the MTL
+ * text 'mtl' ('mlen' bytes, parsed once per statement) as if it were the named file (messages
+ * name that file, resolved against 'path' as usual). 'mtl' NULL (mlen 0) means no library can be
+ * opened: each mtllib statement warns "PATH:LINE: cannot open material library 'X'; using grey
+ * default". For tests, fuzzing and callers that hold both texts in memory. */
+hr_status hr_scene_parse_obj_mtl(const char *obj, size_t olen, const char *mtl, size_t mlen,
+                                 const char *path, const hr_log *log, hr_scene **out,
+                                 hr_err *err);
 /* Builds a built-in scene: "room", "floor", "museum", "cornell". HR_ERR_INVALID if unknown. */
 hr_status hr_scene_builtin(const char *name, hr_scene **out, hr_err *err);
 /* NULL-terminated list of built-in scene names. */

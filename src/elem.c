@@ -56,6 +56,9 @@ static int reserve(hr_solver *s, int64_t need) {
   double *Gu = realloc(s->Gu, (size_t)nc * sizeof *Gu);
   if (!Gu) return 0;
   s->Gu = Gu;
+  double *Gf = realloc(s->Gf, (size_t)nc * sizeof *Gf);
+  if (!Gf) return 0;
+  s->Gf = Gf;
   double(*rho)[3] = realloc(s->rho, (size_t)nc * sizeof *rho);
   if (!rho) return 0;
   s->rho = rho;
@@ -105,7 +108,7 @@ hr_status hr_elem_init(hr_solver *s) {
     }
     s->rho_max[i] = fmax(R[0], fmax(R[1], R[2]));
     s->bref[i] = 1; /* set by push-pull */
-    s->Gu[i] = 0;
+    s->Gu[i] = s->Gf[i] = 0;
     s->bvar[i] = 0;
     s->open[i] = 1; /* hr_elem_open, once the ray caster exists */
   }
@@ -169,7 +172,7 @@ hr_status hr_elem_subdivide(hr_solver *s, int32_t idx) {
       s->B[first + k][c] = s->B[idx][c];
       s->Bs[first + k][c] = s->Bs[idx][c];
       s->G[first + k][c] = 0;
-      s->Gu[first + k] = 0;
+      s->Gu[first + k] = s->Gf[first + k] = 0;
       s->rho[first + k][c] = s->rho[idx][c];
     }
     s->rho_max[first + k] = s->rho_max[idx];

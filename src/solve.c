@@ -114,6 +114,7 @@ void hr_solver_destroy(hr_solver **ps) {
   free(s->Bs);
   free(s->G);
   free(s->Gu);
+  free(s->Gf);
   free(s->rho);
   free(s->rho_max);
   free(s->bref);
@@ -140,10 +141,10 @@ static inline double max3(const double *v) {
   return x > v[2] ? x : v[2];
 }
 
-/* do_link of one link: adds F B_j to g0..g2 and Fu max(B_j) to gu. Dead links have F = 0 and
- * add nothing to g; their Fu < 0 is skipped. */
+/* do_link of one link: adds F B_j to g0..g2, Fu max(B_j) to gu and F to gf. Dead links have
+ * F = 0 and add nothing to g; their Fu < 0 is skipped. */
 static inline void gather_link(const hr_solver *s, const hr_link *l, double *g0, double *g1,
-                               double *g2, double *gu) {
+                               double *g2, double *gu, double *gf) {
   const double *b = s->Bs[l->s];
   double bw[3];
   const int32_t c = s->el[l->s].child;
@@ -158,6 +159,7 @@ static inline void gather_link(const hr_solver *s, const hr_link *l, double *g0,
   *g0 += f * b[0];
   *g1 += f * b[1];
   *g2 += f * b[2];
+  *gf += f;
   if (l->Fu > 0) *gu += l->Fu * max3(b);
 }
 
@@ -165,31 +167,32 @@ static inline void gather_link(const hr_solver *s, const hr_link *l, double *g0,
 static void gather(hr_solver *s) {
 #pragma omp parallel for schedule(dynamic, 256) if (s->nlinks > PAR_MIN)
   for (int64_t e = 0; e < s->nel; e++) {
-    double g0 = 0, g1 = 0, g2 = 0, gu = 0;
+    double g0 = 0, g1 = 0, g2 = 0, gu = 0, gf = 0;
     if (e < s->nrstart)
       for (int64_t k = s->rstart[e]; k < s->rstart[e + 1]; k++)
-        gather_link(s, &s->links[k], &g0, &g1, &g2, &gu);
+        gather_link(s, &s->links[k], &g0, &g1, &g2, &gu, &gf);
     if (s->nlinks > s->nsorted)
       for (int64_t k = s->xstart[e]; k < s->xstart[e + 1]; k++)
-        gather_link(s, &s->links[s->xidx[k]], &g0, &g1, &g2, &gu);
+        gather_link(s, &s->links[s->xidx[k]], &g0, &g1, &g2, &gu, &gf);
     s->G[e][0] = g0;
     s->G[e][1] = g1;
     s->G[e][2] = g2;
     s->Gu[e] = gu;
+    s->Gf[e] = gf;
   }
 }
 
-/* Push 'down' (gathered at ancestors) to the leaves, pull area-weighted B back up. Writes the new
+/* Push 'down' (gathered at ancestors: RGB, Gu, Gf) to the leaves, pull area-weighted B back up. Writes the new
  * B of 'idx' into 'bout', the smallest and largest leaf radiosity below it (largest channel) into
  * range[0..1] the smallest and largest radiosity of its leaves (largest channel) and their
  * difference into s->bvar, and returns the largest change of B over leaves
  * below. Reads the previous B of the element before overwriting it. */
-static double pushpull(hr_solver *s, int32_t idx, const double down[4], double bout[3],
+static double pushpull(hr_solver *s, int32_t idx, const double down[5], double bout[3],
                        double range[2]) {
   const hr_elem *e = &s->el[idx];
   const hr_material *m = &s->scene->mats[s->scene->surfs[e->surf].material];
-  double g[4] = {down[0] + s->G[idx][0], down[1] + s->G[idx][1], down[2] + s->G[idx][2],
-                 down[3] + s->Gu[idx]};
+  double g[5] = {down[0] + s->G[idx][0], down[1] + s->G[idx][1], down[2] + s->G[idx][2],
+                 down[3] + s->Gu[idx], down[4] + s->Gf[idx]};
   const double floor = BREF_FLOOR * s->unit, br = s->rho_max[idx] * g[3];
   s->bref[idx] = br > floor ? br : floor;
   double change = 0, b[3];
@@ -217,7 +220,15 @@ static double pushpull(hr_solver *s, int32_t idx, const double down[4], double b
     }
     for (int c = 0; c < 3; c++) b[c] = acc[c] / area;
   }
-  const double inv = s->open[idx] > 0 ? 1.0 / s->open[idx] : 1.0;
+  /* What the element sends (solver_impl.h, Bs): its reflected light over its open part. The open
+   * fraction from rays is trusted only as far as the element's own links agree: the sum of their
+   * form factors (g[4]) is what its hemisphere sees, which in a closed scene is its open part.
+   * Where the ray test calls a part covered that still sees the scene, the links win; otherwise
+   * such an element would send more light than it receives (measured: the house regr01 of
+   * assimp's test models diverged). */
+  double op = g[4] < 1 ? g[4] : 1;
+  op = s->open[idx] > op ? s->open[idx] : op;
+  const double inv = s->open[idx] > 0 ? 1.0 / op : 1.0; /* wholly closed: about 0 anyway */
   for (int c = 0; c < 3; c++) {
     s->B[idx][c] = bout[c] = b[c];
     s->Bs[idx][c] = m->emit[c] + (b[c] - m->emit[c]) * inv;
@@ -231,11 +242,42 @@ static double push_pull_all(hr_solver *s) {
   int n = s->scene->nsurfs;
 #pragma omp parallel for schedule(dynamic, 8) reduction(max : maxc) if (s->nel > PAR_MIN)
   for (int i = 0; i < n; i++) {
-    double zero[4] = {0, 0, 0, 0}, b[3], range[2];
+    double zero[5] = {0, 0, 0, 0, 0}, b[3], range[2];
     double d = pushpull(s, i, zero, b, range);
     maxc = d > maxc ? d : maxc;
   }
   return maxc;
+}
+
+/* The guard against a wrong answer: every leaf's radiosity must be finite and at most
+ * BOUND_SLACK times the physical bound E_max / (1 - rho_max) (no scene, open or closed, can
+ * exceed it; the slack leaves room for the discretisation). A solution that breaks it is an
+ * error, never a result. */
+#define BOUND_SLACK 2.0
+static hr_status check_physical(const hr_solver *s, hr_err *err) {
+  const hr_scene *sc = s->scene;
+  double emax = 0, rmax = 0;
+  for (int m = 0; m < sc->nmats; m++)
+    for (int c = 0; c < 3; c++) {
+      emax = sc->mats[m].emit[c] > emax ? sc->mats[m].emit[c] : emax;
+      rmax = sc->mats[m].rho[c] > rmax ? sc->mats[m].rho[c] : rmax;
+    }
+  const double bound = rmax < 1 ? BOUND_SLACK * emax / (1 - rmax) : INFINITY;
+  for (int64_t e = 0; e < s->nel; e++) {
+    if (s->el[e].child >= 0) continue;
+    for (int c = 0; c < 3; c++) {
+      const double b = s->B[e][c];
+      if (isfinite(b) && b <= bound && b >= 0) continue;
+      const hr_surface *f = &sc->surfs[s->el[e].surf];
+      return hr_err_set(err, HR_ERR_UNPHYSICAL,
+                        "the solution is not physical after %d iterations: radiosity %g on a "
+                        "polygon of material '%s' (input polygon %d), where at most %g (E/(1-rho)) "
+                        "is possible; please report this scene",
+                        s->iterations + 1, b, sc->mats[f->material].name,
+                        hr_scene_poly_input(sc, f->poly), emax / (1 - rmax));
+    }
+  }
+  return HR_OK;
 }
 
 /* The radiosity unit (see solver_impl.h): the area-weighted mean radiosity of the surfaces,
@@ -289,6 +331,7 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
       gather(s);
       double tc = hr_now();
       double change = push_pull_all(s) / s->unit;
+      if ((st = check_physical(s, err)) != HR_OK) return st;
       update_unit(s);
       double td = hr_now();
       s->t.refine += tb - ta;

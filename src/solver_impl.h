@@ -72,6 +72,7 @@ struct hr_solver {
   double (*G)[3];     /* gathered (irradiance-like, before rho) per element */
   double *Gu;         /* gathered without occlusion, largest channel of the sources: sum of
                          Fu max(B_j), for the oracle's reference radiosity (bref) */
+  double *Gf;         /* sum of the element's own links' form factors (what it sees) */
   double (*rho)[3];   /* reflectance per element (its surface's), beside B for the oracle */
   double *rho_max;    /* largest channel of rho per element */
   double *bref;       /* per element: the radiosity the oracle measures errors against: what
