@@ -107,7 +107,8 @@ typedef struct hr_scene {
 
 hr_status hr_scene_create(const char *name, hr_scene **out);
 void hr_scene_destroy(hr_scene **s);
-/* Adds a material (name copied); returns its index through 'idx'. */
+/* Adds a material (name copied); returns its index through 'idx'. HR_ERR_INVALID unless every
+ * rho is in [0, 1] and every emit finite and >= 0. */
 hr_status hr_scene_add_material(hr_scene *s, const char *name, const double rho[3],
                                 const double emit[3], int *idx);
 /* Finds a material by exact name; returns its index or -1. */
@@ -117,14 +118,22 @@ int hr_scene_find_material(const hr_scene *s, const char *name);
 typedef enum {
   HR_POLY_ADDED = 0,    /* became one or more surfaces */
   HR_POLY_DEGENERATE,   /* zero area (or collinear); nothing added, caller should warn */
-  HR_POLY_NONPLANAR     /* > 4 vertices and not planar within tolerance; nothing added */
+  HR_POLY_NONPLANAR,    /* > 4 vertices and not planar within tolerance; nothing added */
+  HR_POLY_NOT_SIMPLE    /* not convex and crossing itself (or not convex with more than
+                           HR_EAR_MAX vertices); nothing added */
 } hr_poly_result;
 
+/* Largest coordinate magnitude accepted (areas and distances then stay far from overflow). */
+#define HR_COORD_MAX 1e15
+/* Largest non-convex polygon triangulated (ear clipping is quadratic in the vertex count). */
+#define HR_EAR_MAX 4096
 /* Adds one input polygon with 'n' >= 3 vertices (counter-clockwise from the front) and the
  * given material. A planar convex quad stays one surface; a non-planar or non-convex quad is
- * split into two triangles; polygons with more than 4 vertices are fan-split into triangles
- * (degenerate fan triangles dropped). All surfaces created get the same 'poly' index.
- * Coordinates must be finite (HR_ERR_INVALID otherwise). '*res' tells what happened; every call
+ * split into two triangles; a convex polygon with more than 4 vertices is fan-split into
+ * triangles (degenerate fan triangles dropped), a non-convex one is triangulated by ear clipping
+ * (linear time for convex polygons of any size). All surfaces created get the same 'poly' index.
+ * Coordinates must be finite and at most HR_COORD_MAX in magnitude (HR_ERR_INVALID otherwise).
+ * '*res' tells what happened; every call
  * that returns HR_OK records one input polygon (s->inputs). */
 hr_status hr_scene_add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
                                hr_poly_result *res);
@@ -161,7 +170,8 @@ hr_status hr_scene_parse_obj_mtl(const char *obj, size_t olen, const char *mtl, 
 hr_status hr_scene_builtin(const char *name, hr_scene **out, hr_err *err);
 /* NULL-terminated list of built-in scene names. */
 const char *const *hr_scene_builtin_names(void);
-/* Makes material 'name' emit 'rgb'; HR_ERR_INVALID if no such material. */
+/* Makes material 'name' emit 'rgb'; HR_ERR_INVALID if no such material or a value is not finite
+ * and >= 0. */
 hr_status hr_scene_set_emit(hr_scene *s, const char *name, const double rgb[3], hr_err *err);
 
 /* ---------------------------------------------------------------- solver (solve.c) */

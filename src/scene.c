@@ -70,6 +70,9 @@ static int grow(void **p, int *cap, int need, size_t sz) {
 
 hr_status hr_scene_add_material(hr_scene *s, const char *name, const double rho[3],
                                 const double emit[3], int *idx) {
+  for (int c = 0; c < 3; c++)
+    if (!(rho[c] >= 0 && rho[c] <= 1) || !(emit[c] >= 0 && isfinite(emit[c])))
+      return HR_ERR_INVALID;
   if (!grow((void **)&s->mats, &s->cap_mats, s->nmats + 1, sizeof *s->mats)) return HR_ERR_NOMEM;
   hr_material *m = &s->mats[s->nmats];
   m->name = strdup(name ? name : "");
@@ -92,6 +95,11 @@ int hr_scene_find_material(const hr_scene *s, const char *name) {
 hr_status hr_scene_set_emit(hr_scene *s, const char *name, const double rgb[3], hr_err *err) {
   int m = hr_scene_find_material(s, name);
   if (m < 0) return hr_err_set(err, HR_ERR_INVALID, "no material named '%s'", name);
+  for (int c = 0; c < 3; c++)
+    if (!(rgb[c] >= 0 && isfinite(rgb[c])))
+      return hr_err_set(err, HR_ERR_INVALID,
+                        "emission of '%s' must be finite and >= 0 (got %g, %g, %g)", name, rgb[0],
+                        rgb[1], rgb[2]);
   for (int c = 0; c < 3; c++) s->mats[m].emit[c] = rgb[c];
   return HR_OK;
 }
@@ -101,11 +109,15 @@ hr_status hr_scene_set_emit(hr_scene *s, const char *name, const double rgb[3], 
 #define PLANAR_TOL 1e-6
 #define AREA_TOL 1e-10
 
+/* A polygon's size: the diagonal of its bounding box (linear in n; within a factor sqrt(3) of
+ * its diameter). */
 static double poly_size(const hr_vec3 *v, int n) {
-  double d = 0;
-  for (int i = 0; i < n; i++)
-    for (int j = i + 1; j < n; j++) d = fmax(d, v3_len(v3_sub(v[i], v[j])));
-  return d;
+  hr_vec3 lo = v[0], hi = v[0];
+  for (int i = 1; i < n; i++) {
+    lo = v3_min(lo, v[i]);
+    hi = v3_max(hi, v[i]);
+  }
+  return v3_len(v3_sub(hi, lo));
 }
 
 static hr_status push_surface(hr_scene *s, const hr_vec3 *v, int n, int material, int poly,
@@ -166,10 +178,64 @@ int hr_scene_poly_input(const hr_scene *s, int poly) {
 static hr_status add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
                              hr_poly_result *res);
 
+/* Ear clipping of a simple planar polygon with normal 'nrm' into n - 2 triangles (indices into v,
+ * three per triangle, counter-clockwise seen from the front) in 'tri'. Returns 0 when no ear can
+ * be found, i.e. the polygon is not simple (it crosses itself). O(n^2). */
+static int ear_clip(const hr_vec3 *v, int n, hr_vec3 nrm, int *tri) {
+  /* Project on the plane of the two axes other than the normal's largest, keeping the front's
+   * counter-clockwise order. */
+  int ax = fabs(nrm.x) > fabs(nrm.y) ? (fabs(nrm.x) > fabs(nrm.z) ? 0 : 2)
+                                     : (fabs(nrm.y) > fabs(nrm.z) ? 1 : 2);
+  double sign = (ax == 0 ? nrm.x : ax == 1 ? nrm.y : nrm.z) > 0 ? 1 : -1;
+  double *x = malloc((size_t)n * 2 * sizeof *x);
+  int *next = malloc((size_t)n * sizeof *next), *prev = malloc((size_t)n * sizeof *prev);
+  int ok = x && next && prev;
+  for (int i = 0; ok && i < n; i++) {
+    const double c[3] = {v[i].x, v[i].y, v[i].z};
+    x[2 * i] = c[(ax + 1) % 3];
+    x[2 * i + 1] = sign * c[(ax + 2) % 3];
+    next[i] = (i + 1) % n;
+    prev[i] = (i + n - 1) % n;
+  }
+#define CROSS(a, b, c)                                                                             \
+  ((x[2 * (b)] - x[2 * (a)]) * (x[2 * (c) + 1] - x[2 * (a) + 1]) -                              \
+   (x[2 * (b) + 1] - x[2 * (a) + 1]) * (x[2 * (c)] - x[2 * (a)]))
+  int left = n, i = 0, nt = 0, miss = 0;
+  while (ok && left > 3) {
+    const int a = prev[i], c = next[i];
+    int ear = CROSS(a, i, c) > 0;
+    /* no other vertex inside or on the triangle (a, i, c) */
+    for (int j = next[c]; ear && j != a; j = next[j])
+      if (CROSS(a, i, j) >= 0 && CROSS(i, c, j) >= 0 && CROSS(c, a, j) >= 0) ear = 0;
+    if (ear) {
+      tri[3 * nt] = a, tri[3 * nt + 1] = i, tri[3 * nt + 2] = c;
+      nt++;
+      next[a] = c;
+      prev[c] = a;
+      left--;
+      miss = 0;
+      i = c;
+    } else if (++miss > left) {
+      ok = 0; /* a whole turn without an ear: not a simple polygon */
+    } else {
+      i = c;
+    }
+  }
+#undef CROSS
+  if (ok) {
+    tri[3 * nt] = prev[i], tri[3 * nt + 1] = i, tri[3 * nt + 2] = next[i];
+  }
+  free(x);
+  free(next);
+  free(prev);
+  return ok;
+}
+
 hr_status hr_scene_add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
                                hr_poly_result *res) {
   hr_status st = add_polygon(s, v, n, material, res);
   if (st != HR_OK) return st;
+  if (*res == HR_POLY_NONPLANAR || *res == HR_POLY_NOT_SIMPLE) return HR_OK; /* caller errs */
   int ok = *res == HR_POLY_ADDED ? push_input(s, s->npolys - 1, HR_INPUT_SOLVED)
                                  : push_input(s, -1, HR_INPUT_DEGENERATE);
   return ok ? HR_OK : HR_ERR_NOMEM;
@@ -180,7 +246,9 @@ static hr_status add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
   *res = HR_POLY_DEGENERATE;
   if (n < 3 || material < 0 || material >= s->nmats) return HR_ERR_INVALID;
   for (int i = 0; i < n; i++)
-    if (!isfinite(v[i].x) || !isfinite(v[i].y) || !isfinite(v[i].z)) return HR_ERR_INVALID;
+    if (!(fabs(v[i].x) <= HR_COORD_MAX && fabs(v[i].y) <= HR_COORD_MAX &&
+          fabs(v[i].z) <= HR_COORD_MAX))
+      return HR_ERR_INVALID;
   hr_vec3 nn = v3_newell(v, n);
   double len = v3_len(nn), size = poly_size(v, n);
   if (size == 0 || !(0.5 * len > AREA_TOL * size * size)) return HR_OK;
@@ -209,11 +277,36 @@ static hr_status add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
       st = push_surface(s, a, 3, material, poly, &added);
       if (st == HR_OK) st = push_surface(s, b, 3, material, poly, &added);
     }
-  } else {
+  } else if (is_convex(v, n, nrm)) {
     for (int i = 1; i + 1 < n && st == HR_OK; i++) {
       hr_vec3 t[3] = {v[0], v[i], v[i + 1]};
       st = push_surface(s, t, 3, material, poly, &added);
     }
+  } else {
+    /* Not convex: ear clipping; the ears must cover exactly the polygon's area (a polygon that
+     * crosses itself has no such triangulation). */
+    if (n > HR_EAR_MAX) {
+      *res = HR_POLY_NOT_SIMPLE;
+      return HR_OK;
+    }
+    int *tri = malloc((size_t)(n - 2) * 3 * sizeof *tri);
+    if (!tri) return HR_ERR_NOMEM;
+    int ok = ear_clip(v, n, nrm, tri);
+    double sum = 0;
+    for (int k = 0; ok && k < n - 2; k++) {
+      hr_vec3 t[3] = {v[tri[3 * k]], v[tri[3 * k + 1]], v[tri[3 * k + 2]]};
+      sum += 0.5 * v3_len(v3_newell(t, 3));
+    }
+    if (!ok || fabs(sum - 0.5 * len) > 1e-9 * sum + AREA_TOL * size * size) {
+      free(tri);
+      *res = HR_POLY_NOT_SIMPLE;
+      return HR_OK;
+    }
+    for (int k = 0; k < n - 2 && st == HR_OK; k++) {
+      hr_vec3 t[3] = {v[tri[3 * k]], v[tri[3 * k + 1]], v[tri[3 * k + 2]]};
+      st = push_surface(s, t, 3, material, poly, &added);
+    }
+    free(tri);
   }
   if (st != HR_OK) return st;
   if (added == 0) return HR_OK;

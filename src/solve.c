@@ -56,6 +56,10 @@ static double emitted_mean(const hr_scene *sc, double area) {
  * 0.1 s; 1e-3: 0.43%, 0.7 s; 3e-4: 0.25%, 4.3 s (BENCHMARKS.md). */
 
 static hr_status check_options(const hr_options *o, hr_err *err) {
+  const double d[] = {o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max,
+                      o->max_links};
+  for (size_t k = 0; k < sizeof d / sizeof d[0]; k++)
+    if (!isfinite(d[k])) return hr_err_set(err, HR_ERR_INVALID, "options must be finite numbers");
   if (!(o->bf_low > 0)) return hr_err_set(err, HR_ERR_INVALID, "--bf-low must be > 0");
   if (!(o->bf_start >= o->bf_low))
     return hr_err_set(err, HR_ERR_INVALID, "--bf-start must be >= --bf-low");
