@@ -7,6 +7,7 @@
 #include "vec.h"
 
 #include <math.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -124,6 +125,7 @@ static void mid(const uint32_t a[2], const uint32_t b[2], uint32_t m[2]) {
 hr_status hr_elem_subdivide(hr_solver *s, int32_t idx) {
   if (s->el[idx].child >= 0) return HR_OK;
   if (s->el[idx].depth >= HR_GID_DEPTH) return HR_OK;
+  if (s->nel + 4 > INT32_MAX) return HR_ERR_TOO_BIG; /* element indices are int32 */
   if (!reserve(s, s->nel + 4)) return HR_ERR_NOMEM;
   hr_elem *p = &s->el[idx];
   int n = s->scene->surfs[p->surf].nverts;

@@ -34,7 +34,11 @@ static int links_reserve(hr_solver *s, int64_t need) {
   return 1;
 }
 
+/* The candidate pool is addressed by 32-bit offsets (hr_link.cand_off). */
+#define POOL_MAX ((int64_t)UINT32_MAX)
+
 static int pool_reserve(int32_t **pool, int64_t *cap, int64_t need) {
+  if (need > POOL_MAX) return 0; /* the caller tells this from out of memory (pool_too_big) */
   if (need <= *cap) return 1;
   int64_t nc = *cap ? *cap : 1024;
   while (nc < need) nc *= 2;
@@ -382,7 +386,7 @@ static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uin
   if (!failed) {
     int64_t tot = 0;
     for (int64_t k = 0; k < nb; k++) tot += lens[k];
-    if (!pool_reserve(&s->pool, &s->cap_pool, s->npool + tot)) failed = 1;
+    if (!pool_reserve(&s->pool, &s->cap_pool, s->npool + tot)) failed = 1 + (s->npool + tot > POOL_MAX);
   }
   if (!failed) {
     for (int64_t k = 0; k < nb; k++) {
@@ -397,7 +401,7 @@ static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uin
   free(lists);
   free(lens);
   free(which);
-  return failed ? HR_ERR_NOMEM : HR_OK;
+  return failed == 2 ? HR_ERR_TOO_BIG : failed ? HR_ERR_NOMEM : HR_OK;
 }
 
 hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
@@ -496,7 +500,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     }
     slot = realloc(slot, (size_t)ncur * sizeof *slot);
     if (!slot) goto nomem;
-    if (build_lists(s, cur, ncur, dec) != HR_OK) goto nomem;
+    if ((st = build_lists(s, cur, ncur, dec)) != HR_OK) goto fail;
     /* Subdivide the marked elements in link order (deterministic element indices). */
     if (capmark < s->nel) {
       uint8_t *m = realloc(mark, (size_t)s->nel);
@@ -515,7 +519,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       int32_t e = dec[i] == SPLIT_R ? cur[i].r : cur[i].s;
       if (!mark[e]) {
         mark[e] = 1;
-        if (hr_elem_subdivide(s, e) != HR_OK) goto nomem;
+        if ((st = hr_elem_subdivide(s, e)) != HR_OK) goto fail;
       }
       slot[i] = nsplit++;
       nchild_cand += 4 * (int64_t)cur[i].ncand;
@@ -538,6 +542,10 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     /* Children: 4 per split link, candidate capacity = parent's count each. */
     next = malloc((size_t)(4 * nsplit) * sizeof *next);
     int64_t pool0 = s->npool;
+    if (pool0 + nchild_cand > POOL_MAX) {
+      st = HR_ERR_TOO_BIG;
+      goto fail;
+    }
     if (!next || !pool_reserve(&s->pool, &s->cap_pool, pool0 + nchild_cand)) goto nomem;
     /* Offsets of each split link's candidate area: prefix sum in link order. */
     int64_t *coff = malloc((size_t)nsplit * sizeof *coff);
@@ -598,18 +606,23 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     s->cap_links = capkeep;
     keep = NULL;
   }
-  if (s->npool > (int64_t)UINT32_MAX) goto nomem;
   free(dec);
   free(slot);
   free(mark);
   return st;
 nomem:
+  st = HR_ERR_NOMEM;
+fail:
   free(dec);
   free(slot);
   free(mark);
   free(next);
   free(cur);
   free(keep);
+  if (st == HR_ERR_TOO_BIG)
+    return hr_err_set(err, st,
+                      "refinement exceeds a limit: more than 2^31 elements or 2^32 candidate "
+                      "blockers in links (raise --bf-low or --area-min)");
   return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
 }
 

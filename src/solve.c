@@ -86,6 +86,9 @@ hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solv
   hr_status st = check_options(&o, err);
   if (st != HR_OK) return st;
   if (scene->nsurfs == 0) return hr_err_set(err, HR_ERR_INVALID, "scene has no surfaces");
+  if ((int64_t)scene->nsurfs > (INT64_C(1) << (64 - HR_GID_PATH_BITS)) - 1)
+    return hr_err_set(err, HR_ERR_TOO_BIG, "%d surfaces: element ids hold at most %lld",
+                      scene->nsurfs, (long long)((INT64_C(1) << (64 - HR_GID_PATH_BITS)) - 1));
   double emax = hr_scene_max_emit(scene);
   if (!(emax > 0))
     return hr_err_set(err, HR_ERR_NO_EMITTER,
