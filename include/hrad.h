@@ -237,6 +237,18 @@ void hr_solver_destroy(hr_solver **s);
 hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err);
 void hr_solver_stats(const hr_solver *s, hr_stats *st);
 
+/* Writes the solver's state at an iteration boundary (from the iteration callback, or after
+ * hr_solver_run) to 'path', atomically (PATH.tmp, then renamed). The file names elements and
+ * links by global ids in a canonical order: it does not depend on the thread count (or, later,
+ * on how elements are spread over processes). HR_ERR_IO with a message on a write failure. */
+hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err);
+/* Loads a checkpoint into a solver just made by hr_solver_create for the same scene and
+ * options; hr_solver_run then continues from it and ends with the result of an uninterrupted
+ * run, bit for bit. Refused with a message (HR_ERR_INVALID) when the file was written for
+ * another scene or other options, HR_ERR_PARSE when it is damaged. On any error the solver must
+ * be destroyed. */
+hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err);
+
 /* Area-weighted mean radiosity of input polygon 'poly' (rgb out). */
 void hr_solver_poly_radiosity(const hr_solver *s, int poly, double rgb[3]);
 

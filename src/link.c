@@ -626,6 +626,39 @@ fail:
   return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
 }
 
+/* Sorts each receiver's group order[start[e] .. start[e+1]) by the gid of the link's source, so
+ * that a receiver's links (and the sums over them in gather) come in an order fixed by global
+ * ids alone, not by where links or elements sit in memory: a checkpoint restored in another
+ * layout, or a distributed run, adds them up the same way. A receiver has one link per source,
+ * so the order is total. */
+typedef struct gid_key {
+  uint64_t gid;
+  int64_t idx;
+} gid_key;
+
+static int cmp_gid_key(const void *a, const void *b) {
+  const gid_key *x = a, *y = b;
+  return x->gid < y->gid ? -1 : x->gid > y->gid;
+}
+
+static int sort_by_source(const hr_solver *s, int64_t nrecv, const int64_t *start,
+                          int64_t *order) {
+  const int64_t n = start[nrecv];
+  gid_key *k = malloc((size_t)(n > 0 ? n : 1) * sizeof *k);
+  if (!k) return 0;
+#pragma omp parallel for schedule(dynamic, 256) if (n > PAR_MIN)
+  for (int64_t e = 0; e < nrecv; e++) {
+    const int64_t a = start[e], m = start[e + 1] - a;
+    if (m < 2) continue;
+    for (int64_t i = a; i < a + m; i++)
+      k[i] = (gid_key){s->el[s->links[order[i]].s].gid, order[i]};
+    qsort(k + a, (size_t)m, sizeof *k, cmp_gid_key);
+    for (int64_t i = a; i < a + m; i++) order[i] = k[i].idx;
+  }
+  free(k);
+  return 1;
+}
+
 /* Counting sort of links[lo, hi) by receiver into 'order' (stable); 'start' gets nel+1 offsets. */
 static void group_by_receiver(const hr_solver *s, int64_t lo, int64_t hi, int64_t *start,
                               int64_t *order) {
@@ -654,7 +687,7 @@ hr_status hr_link_sort(hr_solver *s) {
     if (xi) s->xidx = xi;
     if (!xs || !xi) return HR_ERR_NOMEM;
     group_by_receiver(s, s->nsorted, s->nlinks, s->xstart, s->xidx);
-    return HR_OK;
+    return sort_by_source(s, s->nel, s->xstart, s->xidx) ? HR_OK : HR_ERR_NOMEM;
   }
   /* Full sort: drop dead links, group by receiver, compact the candidate pool. */
   int64_t n = 0;
@@ -678,6 +711,12 @@ hr_status hr_link_sort(hr_solver *s) {
     return HR_ERR_NOMEM;
   }
   group_by_receiver(s, 0, n, st, order);
+  if (!sort_by_source(s, s->nel, st, order)) {
+    free(order);
+    free(out);
+    free(np);
+    return HR_ERR_NOMEM;
+  }
   /* New pool offsets in receiver order (serial prefix sum), then the copies in parallel. */
   int64_t *noff = malloc((size_t)(n > 0 ? n : 1) * sizeof *noff);
   if (!noff) {

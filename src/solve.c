@@ -175,12 +175,19 @@ static void gather(hr_solver *s) {
 #pragma omp parallel for schedule(dynamic, 256) if (s->nlinks > PAR_MIN)
   for (int64_t e = 0; e < s->nel; e++) {
     double g0 = 0, g1 = 0, g2 = 0, gu = 0, gf = 0;
-    if (e < s->nrstart)
-      for (int64_t k = s->rstart[e]; k < s->rstart[e + 1]; k++)
-        gather_link(s, &s->links[k], &g0, &g1, &g2, &gu, &gf);
-    if (s->nlinks > s->nsorted)
-      for (int64_t k = s->xstart[e]; k < s->xstart[e + 1]; k++)
-        gather_link(s, &s->links[s->xidx[k]], &g0, &g1, &g2, &gu, &gf);
+    /* The sorted links and the extras, each in source gid order, merged: the sum runs in the
+     * order of the sources' gids however the links are stored (hr_link_sort). */
+    int64_t k = e < s->nrstart ? s->rstart[e] : 0, ke = e < s->nrstart ? s->rstart[e + 1] : 0;
+    int64_t x = 0, xe = 0;
+    if (s->nlinks > s->nsorted) x = s->xstart[e], xe = s->xstart[e + 1];
+    while (k < ke || x < xe) {
+      const hr_link *l;
+      if (x >= xe || (k < ke && s->el[s->links[k].s].gid < s->el[s->links[s->xidx[x]].s].gid))
+        l = &s->links[k++];
+      else
+        l = &s->links[s->xidx[x++]];
+      gather_link(s, l, &g0, &g1, &g2, &gu, &gf);
+    }
     s->G[e][0] = g0;
     s->G[e][1] = g1;
     s->G[e][2] = g2;
@@ -308,67 +315,98 @@ static int64_t count_leaves(const hr_solver *s) {
   return n;
 }
 
-hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
+/* Builds what the iterations need that a checkpoint does not hold: the ray caster, the shaft
+ * hierarchy and the open fractions of the surfaces. */
+static hr_status prepare(hr_solver *s, hr_err *err) {
   hr_status st;
-  omp_set_num_threads(s->threads);
-  s->t_start = hr_now();
-  double t0 = s->t_start;
   if (!s->vis && (st = hr_vis_create(s->scene, &s->vis, err)) != HR_OK) return st;
   if (!s->shaft && (st = hr_shaft_index_create(s->scene, &s->shaft)) != HR_OK)
     return hr_err_set(err, st, "cannot build the shaft-culling hierarchy");
   s->vf.vis = s->vis;
-  hr_elem_open(s, 0, s->nel);
-  if ((st = hr_link_init(s, err)) != HR_OK) return st;
-  double t1 = hr_now();
-  s->t.init_graph = t1 - t0;
+  return HR_OK;
+}
+
+/* One iteration of Figure 3 at s->bf_e ({7..15}): refinement (not in the first iteration, which
+ * only gathers through the initial links: the oracle measures errors against the light each
+ * element would get, bref, which needs one gather), gather, push-pull and the physical guard.
+ * Returns the largest change of B relative to the radiosity unit and the new links. */
+static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *err) {
+  hr_status st;
+  double ta = hr_now();
+  *nnew = 0;
+  if (s->iterations > 0 && (st = hr_link_refine(s, s->bf_e, nnew, err)) != HR_OK) return st;
+  if ((st = hr_link_sort(s)) != HR_OK) return hr_err_set(err, st, "out of memory");
+  double tb = hr_now();
+  gather(s);
+  double tc = hr_now();
+  *change = push_pull_all(s) / s->unit;
+  if ((st = check_physical(s, err)) != HR_OK) return st;
+  update_unit(s);
+  double td = hr_now();
+  s->t.refine += tb - ta;
+  s->t.gather += tc - tb;
+  s->t.push_pull += td - tc;
+  s->iterations++;
+  return HR_OK;
+}
+
+/* The convergence tests after an iteration at s->bf_e ({16}, {17}, {18}): moves s->bf_e to the
+ * next level when this one is done, or sets s->done (and s->converged at BF_low). */
+static void advance(hr_solver *s, double change, int64_t nnew, int stop) {
   const hr_options *o = &s->opt;
-  double bf_e = o->bf_start;
-  s->converged = 0;
-  int stop = 0;
-  for (;;) { /* {3}..{18}: multigrid levels */
-    int at_low = bf_e <= o->bf_low * (1 + 1e-12);
-    for (;;) { /* {4}..{16}: inner loop */
-      double ta = hr_now();
-      int64_t nnew = 0;
-      /* The first iteration only gathers through the initial links: the oracle measures errors
-       * against the light each element would get (bref), which needs one gather. */
-      if (s->iterations > 0 && (st = hr_link_refine(s, bf_e, &nnew, err)) != HR_OK) return st;
-      if ((st = hr_link_sort(s)) != HR_OK) return hr_err_set(err, st, "out of memory");
-      double tb = hr_now();
-      gather(s);
-      double tc = hr_now();
-      double change = push_pull_all(s) / s->unit;
-      if ((st = check_physical(s, err)) != HR_OK) return st;
-      update_unit(s);
-      double td = hr_now();
-      s->t.refine += tb - ta;
-      s->t.gather += tc - tb;
-      s->t.push_pull += td - tc;
-      s->iterations++;
-      if (cb) {
-        hr_iter_info info = {s->iterations, bf_e, count_leaves(s), s->nlinks - s->ndead, change,
-                             hr_now() - s->t_start};
-        if (cb(ud, s, &info)) stop = 1;
-      }
-      /* Strict convergence ({16}, and {18} at BF_low): B settled and no link refined. */
-      int strict = change < o->b_eps && nnew == 0;
-      int level_done = strict;
-      if (o->relax && !at_low) {
-        /* Section 2.2.4: at an intermediate level, a change below B_max counts as approximately
-         * converged once the links settle, or at once while many new links still appear (the
-         * next, lower BF_e will refine them anyway). */
-        int many = (double)nnew * 100.0 >= (double)o->relax_links * (double)s->nlinks;
-        level_done = change < o->b_max && (nnew == 0 || many);
-      }
-      if (level_done || stop || s->iterations >= o->max_iters) {
-        if (at_low && strict) s->converged = 1;
-        break;
+  const int at_low = s->bf_e <= o->bf_low * (1 + 1e-12);
+  /* Strict convergence ({16}, and {18} at BF_low): B settled and no link refined. */
+  const int strict = change < o->b_eps && nnew == 0;
+  int level_done = strict;
+  if (o->relax && !at_low) {
+    /* Section 2.2.4: at an intermediate level, a change below B_max counts as approximately
+     * converged once the links settle, or at once while many new links still appear (the next,
+     * lower BF_e will refine them anyway). */
+    int many = (double)nnew * 100.0 >= (double)o->relax_links * (double)s->nlinks;
+    level_done = change < o->b_max && (nnew == 0 || many);
+  }
+  if (!(level_done || stop || s->iterations >= o->max_iters)) return;
+  if (at_low && strict) s->converged = 1;
+  if (stop || s->iterations >= o->max_iters || at_low) {
+    s->done = 1;
+    return;
+  }
+  /* The next level; a last step shorter than half a level goes straight to BF_low. */
+  s->bf_e = s->bf_e / o->bf_factor;
+  if (s->bf_e < o->bf_low * sqrt(o->bf_factor)) s->bf_e = o->bf_low;
+}
+
+hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
+  hr_status st;
+  omp_set_num_threads(s->threads);
+  s->t_start = hr_now() - s->t.total; /* a resumed run goes on counting */
+  if ((st = prepare(s, err)) != HR_OK) return st;
+  if (!s->started) {
+    const double t0 = hr_now();
+    hr_elem_open(s, 0, s->nel);
+    if ((st = hr_link_init(s, err)) != HR_OK) return st;
+    s->t.init_graph = hr_now() - t0;
+    s->bf_e = s->opt.bf_start;
+    s->converged = 0;
+    s->started = 1;
+  }
+  while (!s->done) {
+    const double bf_e = s->bf_e;
+    double change = 0;
+    int64_t nnew = 0;
+    if ((st = iterate(s, &change, &nnew, err)) != HR_OK) return st;
+    advance(s, change, nnew, 0);
+    s->t.total = hr_now() - s->t_start;
+    /* Display ({15}) and checkpoints: the state is complete here, and s->bf_e is already the
+     * next iteration's. */
+    if (cb) {
+      hr_iter_info info = {s->iterations, bf_e, count_leaves(s), s->nlinks - s->ndead, change,
+                           s->t.total};
+      if (cb(ud, s, &info) && !s->done) {
+        s->done = 1;
+        s->stopped = 1;
       }
     }
-    if (stop || s->iterations >= o->max_iters || at_low) break;
-    /* The next level; a last step shorter than half a level goes straight to BF_low. */
-    bf_e = bf_e / o->bf_factor;
-    if (bf_e < o->bf_low * sqrt(o->bf_factor)) bf_e = o->bf_low;
   }
   s->t.total = hr_now() - s->t_start;
   return HR_OK;

@@ -100,6 +100,11 @@ struct hr_solver {
    * for dead links). */
   int32_t *ls;
   float *lfo;
+  /* progress of Figure 3 (what a checkpoint holds beside the graph) */
+  int started;        /* initial linking done */
+  int done;           /* the last iteration has run */
+  int stopped;        /* the caller's callback stopped the run */
+  double bf_e;        /* BF_e of the next iteration */
   /* counters */
   int64_t rays, initial_links;
   int iterations, converged, threads;

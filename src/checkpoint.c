@@ -1,0 +1,420 @@
+/* checkpoint.c: saving the solver's state at an iteration boundary and resuming from it.
+ *
+ * The file names elements and links by their global ids (gids) and lists them in a canonical
+ * order (elements by gid, links by receiver gid and then source gid), so it does not depend on
+ * where anything sits in memory: not on the thread count, and later not on how elements are
+ * spread over processes. Element geometry is not stored (it follows from the gid); the per-element
+ * state the next iteration reads is (B, what it sends, the oracle's reference and spread, the
+ * open fraction). Because the solver's sums run in gid order (hr_link_sort, gather), a resumed
+ * run ends bit-identical to an uninterrupted one.
+ *
+ * Layout (little-endian): "HRADCKP1", u32 version, u64 scene hash, u64 options hash, the progress
+ * of Figure 3, the elements, the links with their candidate lists, and a u64 checksum of all that
+ * precedes it. A file is written to PATH.tmp and renamed into place, so a kill leaves the
+ * previous checkpoint intact. */
+#include "solver_impl.h"
+#include "vec.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define MAGIC "HRADCKP1"
+#define VERSION 1u
+
+/* ---------------------------------------------------------------- hashing */
+
+static uint64_t hash_bytes(uint64_t h, const void *p, size_t n) {
+  const unsigned char *b = p;
+  for (size_t i = 0; i < n; i += 8) {
+    uint64_t w = 0;
+    memcpy(&w, b + i, n - i < 8 ? n - i : 8);
+    h = u64_mix(h ^ w) + i;
+  }
+  return u64_mix(h ^ n);
+}
+
+/* Everything of the scene the solution depends on. */
+static uint64_t scene_hash(const hr_scene *sc) {
+  uint64_t h = hash_bytes(0x5ce11e, &sc->nsurfs, sizeof sc->nsurfs);
+  for (int i = 0; i < sc->nsurfs; i++) {
+    const hr_surface *f = &sc->surfs[i];
+    h = hash_bytes(h, &f->nverts, sizeof f->nverts);
+    h = hash_bytes(h, f->v, sizeof f->v[0] * (size_t)f->nverts);
+    h = hash_bytes(h, &f->material, sizeof f->material);
+  }
+  for (int m = 0; m < sc->nmats; m++) {
+    h = hash_bytes(h, sc->mats[m].rho, sizeof sc->mats[m].rho);
+    h = hash_bytes(h, sc->mats[m].emit, sizeof sc->mats[m].emit);
+  }
+  return h;
+}
+
+/* The options the solution depends on (not threads, max_iters or max_links). */
+static uint64_t options_hash(const hr_options *o) {
+  const double d[] = {o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max};
+  const int64_t n[] = {o->relax, o->relax_links, o->rays, (int64_t)o->seed};
+  return hash_bytes(hash_bytes(0x0b7, d, sizeof d), n, sizeof n);
+}
+
+/* ---------------------------------------------------------------- writing */
+
+typedef struct writer {
+  FILE *f;
+  uint64_t h;
+  int bad;
+} writer;
+
+static void put(writer *w, const void *p, size_t n) {
+  if (w->bad) return;
+  w->h = hash_bytes(w->h, p, n);
+  if (fwrite(p, 1, n, w->f) != n) w->bad = 1;
+}
+
+/* The progress of Figure 3. */
+typedef struct progress {
+  int32_t iterations, converged, done, stopped;
+  double bf_e, unit;
+  int64_t rays, initial_links;
+  hr_timing t;
+} progress;
+
+/* Per element, after its gid. */
+typedef struct elem_rec {
+  double B[3], Bs[3], bref, bvar, open;
+} elem_rec;
+
+/* Per link, before its candidate ids. */
+typedef struct link_rec {
+  uint64_t r, s;
+  float F, Fu, dF, dS, w[4];
+  int32_t ncand;
+} link_rec;
+
+static int cmp_u64_idx(const void *a, const void *b) {
+  const uint64_t *x = a, *y = b;
+  return x[0] < y[0] ? -1 : x[0] > y[0];
+}
+
+static int cmp_link_key(const void *a, const void *b) {
+  const uint64_t *x = a, *y = b;
+  if (x[0] != y[0]) return x[0] < y[0] ? -1 : 1;
+  return x[1] < y[1] ? -1 : x[1] > y[1];
+}
+
+hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err) {
+  if (!s->started)
+    return hr_err_set(err, HR_ERR_INVALID, "%s: nothing to save before the first iteration", path);
+  /* Canonical orders: (gid, idx) pairs for elements, (receiver gid, source gid, idx) for the
+   * live links. */
+  uint64_t(*ek)[2] = malloc((size_t)s->nel * sizeof *ek);
+  int64_t nl = 0;
+  for (int64_t k = 0; k < s->nlinks; k++) nl += s->links[k].Fu >= 0;
+  uint64_t(*lk)[3] = malloc((size_t)(nl > 0 ? nl : 1) * sizeof *lk);
+  char tmp[4200];
+  snprintf(tmp, sizeof tmp, "%s.tmp", path);
+  writer w = {NULL, 0, 0};
+  if (!ek || !lk) {
+    free(ek);
+    free(lk);
+    return hr_err_set(err, HR_ERR_NOMEM, "out of memory writing %s", path);
+  }
+  for (int64_t e = 0; e < s->nel; e++) ek[e][0] = s->el[e].gid, ek[e][1] = (uint64_t)e;
+  qsort(ek, (size_t)s->nel, sizeof *ek, cmp_u64_idx);
+  for (int64_t k = 0, i = 0; k < s->nlinks; k++)
+    if (s->links[k].Fu >= 0) {
+      lk[i][0] = s->el[s->links[k].r].gid, lk[i][1] = s->el[s->links[k].s].gid;
+      lk[i++][2] = (uint64_t)k;
+    }
+  qsort(lk, (size_t)nl, sizeof *lk, cmp_link_key);
+  w.f = fopen(tmp, "wb");
+  if (!w.f) {
+    free(ek);
+    free(lk);
+    return hr_err_set(err, HR_ERR_IO, "%s: cannot write: %s", tmp, strerror(errno));
+  }
+  const uint32_t version = VERSION;
+  const uint64_t hs = scene_hash(s->scene), ho = options_hash(&s->opt);
+  put(&w, MAGIC, 8);
+  put(&w, &version, sizeof version);
+  put(&w, &hs, sizeof hs);
+  put(&w, &ho, sizeof ho);
+  progress pr = {s->iterations, s->converged, s->done, s->stopped, s->bf_e, s->unit, s->rays,
+                 s->initial_links, s->t};
+  put(&w, &pr, sizeof pr);
+  put(&w, &s->nel, sizeof s->nel);
+  for (int64_t i = 0; i < s->nel; i++) {
+    const int64_t e = (int64_t)ek[i][1];
+    elem_rec r;
+    memcpy(r.B, s->B[e], sizeof r.B);
+    memcpy(r.Bs, s->Bs[e], sizeof r.Bs);
+    r.bref = s->bref[e], r.bvar = s->bvar[e], r.open = s->open[e];
+    put(&w, &ek[i][0], sizeof ek[i][0]);
+    put(&w, &r, sizeof r);
+  }
+  put(&w, &nl, sizeof nl);
+  for (int64_t i = 0; i < nl; i++) {
+    const hr_link *l = &s->links[lk[i][2]];
+    link_rec r = {lk[i][0], lk[i][1], l->F, l->Fu, l->dF, l->dS, {0}, l->ncand};
+    memcpy(r.w, l->w, sizeof r.w);
+    put(&w, &r, sizeof r);
+    if (l->ncand > 0) put(&w, s->pool + l->cand_off, (size_t)l->ncand * sizeof(int32_t));
+  }
+  const uint64_t sum = w.h;
+  put(&w, &sum, sizeof sum);
+  free(ek);
+  free(lk);
+  int bad = w.bad || fflush(w.f) != 0 || ferror(w.f);
+  if (fclose(w.f) != 0) bad = 1;
+  if (bad || rename(tmp, path) != 0) {
+    int e = errno;
+    remove(tmp);
+    return hr_err_set(err, HR_ERR_IO, "%s: cannot write the checkpoint: %s", path, strerror(e));
+  }
+  return HR_OK;
+}
+
+/* ---------------------------------------------------------------- reading */
+
+typedef struct reader {
+  const unsigned char *p, *end;
+  uint64_t h;
+  int bad;
+} reader;
+
+static void get(reader *r, void *out, size_t n) {
+  if (r->bad || (size_t)(r->end - r->p) < n) {
+    r->bad = 1;
+    memset(out, 0, n);
+    return;
+  }
+  memcpy(out, r->p, n);
+  r->h = hash_bytes(r->h, r->p, n);
+  r->p += n;
+}
+
+/* Reads the whole file; NULL with a message on failure. */
+static unsigned char *slurp(const char *path, size_t *len, hr_err *err) {
+  FILE *f = fopen(path, "rb");
+  if (!f) {
+    hr_err_set(err, HR_ERR_IO, "%s: cannot read: %s", path, strerror(errno));
+    return NULL;
+  }
+  unsigned char *buf = NULL;
+  size_t n = 0, cap = 0;
+  for (;;) {
+    if (n == cap) {
+      size_t nc = cap ? 2 * cap : 1 << 20;
+      unsigned char *b = realloc(buf, nc);
+      if (!b) {
+        free(buf);
+        fclose(f);
+        hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
+        return NULL;
+      }
+      buf = b, cap = nc;
+    }
+    size_t got = fread(buf + n, 1, cap - n, f);
+    n += got;
+    if (got == 0) break;
+  }
+  int bad = ferror(f);
+  fclose(f);
+  if (bad) {
+    free(buf);
+    hr_err_set(err, HR_ERR_IO, "%s: read error", path);
+    return NULL;
+  }
+  *len = n;
+  return buf;
+}
+
+/* A gid -> element index table (open addressing). */
+typedef struct gid_map {
+  uint64_t *key;
+  int32_t *val;
+  size_t mask;
+} gid_map;
+
+static int map_init(gid_map *m, int64_t n) {
+  size_t cap = 64;
+  while (cap < (size_t)n * 2) cap *= 2;
+  m->key = calloc(cap, sizeof *m->key);
+  m->val = malloc(cap * sizeof *m->val);
+  m->mask = cap - 1;
+  return m->key && m->val;
+}
+
+static void map_put(gid_map *m, uint64_t gid, int32_t idx) {
+  size_t i = (size_t)u64_mix(gid) & m->mask;
+  while (m->key[i] && m->key[i] != gid) i = (i + 1) & m->mask;
+  m->key[i] = gid; /* gids are never 0: the heap index has a sentinel bit */
+  m->val[i] = idx;
+}
+
+static int32_t map_get(const gid_map *m, uint64_t gid) {
+  size_t i = (size_t)u64_mix(gid) & m->mask;
+  while (m->key[i]) {
+    if (m->key[i] == gid) return m->val[i];
+    i = (i + 1) & m->mask;
+  }
+  return -1;
+}
+
+/* Creates (by subdividing its parent, which exists) the element with gid 'g'; its index, or -1
+ * when the gid cannot be an element of this scene. */
+static int32_t make_element(hr_solver *s, gid_map *m, uint64_t g) {
+  const uint64_t pathmask = (UINT64_C(1) << HR_GID_PATH_BITS) - 1;
+  const uint64_t heap = g & pathmask, surf = g >> HR_GID_PATH_BITS;
+  if (surf >= (uint64_t)s->scene->nsurfs || heap < 4) return -1;
+  const int32_t parent = map_get(m, (g & ~pathmask) | (heap >> 2));
+  if (parent < 0) return -1;
+  if (s->el[parent].child < 0 && hr_elem_subdivide(s, parent) != HR_OK) return -2;
+  if (s->el[parent].child < 0) return -1;
+  const int32_t first = s->el[parent].child;
+  for (int k = 0; k < 4; k++) map_put(m, s->el[first + k].gid, first + k);
+  return first + (int32_t)(heap & 3);
+}
+
+/* Reads the elements; 0 on a damaged file (message set), -1 when out of memory. */
+static int read_elements(hr_solver *s, reader *r, gid_map *m, const char *path, hr_err *err) {
+  int64_t n;
+  get(r, &n, sizeof n);
+  if (r->bad || n < s->scene->nsurfs || n > (int64_t)(r->end - r->p)) {
+    hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (element count)", path);
+    return 0;
+  }
+  if (!map_init(m, n)) return -1;
+  for (int32_t i = 0; i < s->scene->nsurfs; i++) map_put(m, s->el[i].gid, i);
+  for (int64_t i = 0; i < n; i++) {
+    uint64_t g;
+    elem_rec er;
+    get(r, &g, sizeof g);
+    get(r, &er, sizeof er);
+    if (r->bad) break;
+    int32_t e = map_get(m, g);
+    if (e < 0) e = make_element(s, m, g);
+    if (e == -2) return -1;
+    if (e < 0) {
+      hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (element %llx)", path,
+                 (unsigned long long)g);
+      return 0;
+    }
+    memcpy(s->B[e], er.B, sizeof er.B);
+    memcpy(s->Bs[e], er.Bs, sizeof er.Bs);
+    s->bref[e] = er.bref, s->bvar[e] = er.bvar, s->open[e] = er.open;
+  }
+  if (r->bad || s->nel != n) {
+    hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (elements)", path);
+    return 0;
+  }
+  return 1;
+}
+
+/* Reads the links into s->links and s->pool; 0 on a damaged file, -1 when out of memory. */
+static int read_links(hr_solver *s, reader *r, const gid_map *m, const char *path, hr_err *err) {
+  int64_t n;
+  get(r, &n, sizeof n);
+  if (r->bad || n < 0 || n > (int64_t)(r->end - r->p) / (int64_t)sizeof(link_rec)) {
+    hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (link count)", path);
+    return 0;
+  }
+  s->links = malloc((size_t)(n > 0 ? n : 1) * sizeof *s->links);
+  if (!s->links) return -1;
+  s->cap_links = n > 0 ? n : 1;
+  for (int64_t i = 0; i < n; i++) {
+    link_rec lr;
+    get(r, &lr, sizeof lr);
+    const int32_t ri = map_get(m, lr.r), si = map_get(m, lr.s);
+    if (r->bad || ri < 0 || si < 0 || lr.ncand < -1 ||
+        (lr.ncand > 0 && (size_t)lr.ncand > (size_t)(r->end - r->p) / sizeof(int32_t))) {
+      hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (link %lld)", path, (long long)i);
+      return 0;
+    }
+    hr_link *l = &s->links[i];
+    *l = (hr_link){.r = ri, .s = si, .F = lr.F, .Fu = lr.Fu, .dF = lr.dF, .dS = lr.dS,
+                   .cand_off = 0, .ncand = lr.ncand};
+    memcpy(l->w, lr.w, sizeof l->w);
+    if (lr.ncand > 0) {
+      if (s->npool + lr.ncand > (int64_t)UINT32_MAX) return -1;
+      if (s->npool + lr.ncand > s->cap_pool) {
+        int64_t nc = s->cap_pool ? 2 * s->cap_pool : 1024;
+        while (nc < s->npool + lr.ncand) nc *= 2;
+        int32_t *p = realloc(s->pool, (size_t)nc * sizeof *p);
+        if (!p) return -1;
+        s->pool = p, s->cap_pool = nc;
+      }
+      get(r, s->pool + s->npool, (size_t)lr.ncand * sizeof(int32_t));
+      for (int32_t k = 0; k < lr.ncand; k++)
+        if (s->pool[s->npool + k] < 0 || s->pool[s->npool + k] >= s->scene->nsurfs) r->bad = 1;
+      l->cand_off = (uint32_t)s->npool;
+      s->npool += lr.ncand;
+    }
+    s->nlinks = i + 1;
+  }
+  if (r->bad) {
+    hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (links)", path);
+    return 0;
+  }
+  return 1;
+}
+
+hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err) {
+  if (s->started || s->nel != s->scene->nsurfs)
+    return hr_err_set(err, HR_ERR_INVALID, "%s: resume needs a solver that has not run", path);
+  size_t len = 0;
+  unsigned char *buf = slurp(path, &len, err);
+  if (!buf) return HR_ERR_IO;
+  reader r = {buf, buf + len, 0, 0};
+  char magic[8];
+  uint32_t version;
+  uint64_t hs, ho;
+  get(&r, magic, 8);
+  get(&r, &version, sizeof version);
+  get(&r, &hs, sizeof hs);
+  get(&r, &ho, sizeof ho);
+  hr_status st = HR_OK;
+  gid_map m = {NULL, NULL, 0};
+  /* The checksum (of every piece the writer put, in its pieces) is checked at the end. */
+  uint64_t sum = 0;
+  if (len >= 8) memcpy(&sum, buf + len - 8, 8);
+  if (r.bad || memcmp(magic, MAGIC, 8) != 0) {
+    st = hr_err_set(err, HR_ERR_PARSE, "%s: not an hrad checkpoint", path);
+  } else if (version != VERSION) {
+    st = hr_err_set(err, HR_ERR_PARSE, "%s: checkpoint version %u, this hrad reads %u", path,
+                    version, VERSION);
+  } else if (hs != scene_hash(s->scene)) {
+    st = hr_err_set(err, HR_ERR_INVALID, "%s: the checkpoint was written for another scene",
+                    path);
+  } else if (ho != options_hash(&s->opt)) {
+    st = hr_err_set(err, HR_ERR_INVALID,
+                    "%s: the checkpoint was written with other solver options (--bf-low, "
+                    "--area-min, --rays, --seed, ...): resume with the same ones",
+                    path);
+  }
+  progress pr;
+  if (st == HR_OK) {
+    r.end = buf + len - 8; /* the checksum is not part of the content */
+    get(&r, &pr, sizeof pr);
+    int ok = r.bad ? 0 : read_elements(s, &r, &m, path, err);
+    if (ok > 0) ok = read_links(s, &r, &m, path, err);
+    if (ok < 0)
+      st = hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
+    else if (ok == 0)
+      st = HR_ERR_PARSE; /* message set */
+    else if (r.p != r.end || r.h != sum)
+      st = hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (checksum)", path);
+  }
+  free(m.key);
+  free(m.val);
+  free(buf);
+  if (st != HR_OK) return st;
+  s->iterations = pr.iterations, s->converged = pr.converged, s->done = pr.done;
+  s->stopped = pr.stopped, s->bf_e = pr.bf_e, s->unit = pr.unit, s->rays = pr.rays;
+  s->initial_links = pr.initial_links, s->t = pr.t;
+  s->started = 1;
+  s->sorted = 0; /* the next hr_link_sort groups the links afresh */
+  s->nsorted = s->ndead = 0;
+  return HR_OK;
+}
