@@ -498,8 +498,9 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
 #pragma omp parallel for schedule(static) if (ncur > PAR_MIN)
       for (int64_t i = 0; i < ncur; i++) dec[i] = decide(s, &cur[i], bf_e);
     }
-    slot = realloc(slot, (size_t)ncur * sizeof *slot);
-    if (!slot) goto nomem;
+    int64_t *sl2 = realloc(slot, (size_t)ncur * sizeof *slot);
+    if (!sl2) goto nomem;
+    slot = sl2;
     if ((st = build_lists(s, cur, ncur, dec)) != HR_OK) goto fail;
     /* Subdivide the marked elements in link order (deterministic element indices). */
     if (capmark < s->nel) {
