@@ -107,8 +107,11 @@ typedef struct hr_scene {
 
 hr_status hr_scene_create(const char *name, hr_scene **out);
 void hr_scene_destroy(hr_scene **s);
+/* Largest emission accepted (radiosities, their squares in error estimates and float outputs
+ * then stay finite). */
+#define HR_EMIT_MAX 1e30
 /* Adds a material (name copied); returns its index through 'idx'. HR_ERR_INVALID unless every
- * rho is in [0, 1] and every emit finite and >= 0. */
+ * rho is in [0, 1] and every emit in [0, HR_EMIT_MAX]. */
 hr_status hr_scene_add_material(hr_scene *s, const char *name, const double rho[3],
                                 const double emit[3], int *idx);
 /* Finds a material by exact name; returns its index or -1. */
@@ -170,8 +173,8 @@ hr_status hr_scene_parse_obj_mtl(const char *obj, size_t olen, const char *mtl, 
 hr_status hr_scene_builtin(const char *name, hr_scene **out, hr_err *err);
 /* NULL-terminated list of built-in scene names. */
 const char *const *hr_scene_builtin_names(void);
-/* Makes material 'name' emit 'rgb'; HR_ERR_INVALID if no such material or a value is not finite
- * and >= 0. */
+/* Makes material 'name' emit 'rgb'; HR_ERR_INVALID if no such material or a value is not in
+ * [0, HR_EMIT_MAX]. */
 hr_status hr_scene_set_emit(hr_scene *s, const char *name, const double rgb[3], hr_err *err);
 
 /* ---------------------------------------------------------------- solver (solve.c) */
@@ -246,7 +249,8 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
  * options; hr_solver_run then continues from it and ends with the result of an uninterrupted
  * run, bit for bit. Refused with a message (HR_ERR_INVALID) when the file was written for
  * another scene or other options, HR_ERR_PARSE when it is damaged. On any error the solver must
- * be destroyed. */
+ * be destroyed. A checkpoint of a run that ended without converging (its max_iters, or its
+ * callback) continues up to this solver's max_iters (not part of "the options"). */
 hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err);
 
 /* Area-weighted mean radiosity of input polygon 'poly' (rgb out). */

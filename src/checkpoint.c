@@ -414,6 +414,9 @@ hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err) {
   s->stopped = pr.stopped, s->bf_e = pr.bf_e, s->unit = pr.unit, s->rays = pr.rays;
   s->initial_links = pr.initial_links, s->t = pr.t;
   s->started = 1;
+  /* A run that stopped without converging (max_iters, or its callback) goes on when this
+   * solver's max_iters allows more iterations. */
+  if (s->done && !s->converged && s->iterations < s->opt.max_iters) s->done = s->stopped = 0;
   s->sorted = 0; /* the next hr_link_sort groups the links afresh */
   s->nsorted = s->ndead = 0;
   return HR_OK;

@@ -151,6 +151,8 @@ static hr_status ctx_create(pt_ctx *c, const hr_scene *s, hr_err *err) {
     if (s->surfs[i].poly < 0 || s->surfs[i].poly >= s->npolys || s->surfs[i].material < 0 ||
         s->surfs[i].material >= s->nmats || (s->surfs[i].nverts != 3 && s->surfs[i].nverts != 4))
       return hr_err_set(err, HR_ERR_INVALID, "path tracer: surface %d is malformed", i);
+  hr_status rs = hr_vis_check_range(s, err);
+  if (rs != HR_OK) return rs;
   c->s = s;
   c->lift = hr_vis_lift(s);
   size_t n = (size_t)s->nsurfs;

@@ -71,7 +71,7 @@ static int grow(void **p, int *cap, int need, size_t sz) {
 hr_status hr_scene_add_material(hr_scene *s, const char *name, const double rho[3],
                                 const double emit[3], int *idx) {
   for (int c = 0; c < 3; c++)
-    if (!(rho[c] >= 0 && rho[c] <= 1) || !(emit[c] >= 0 && isfinite(emit[c])))
+    if (!(rho[c] >= 0 && rho[c] <= 1) || !(emit[c] >= 0 && emit[c] <= HR_EMIT_MAX))
       return HR_ERR_INVALID;
   if (!grow((void **)&s->mats, &s->cap_mats, s->nmats + 1, sizeof *s->mats)) return HR_ERR_NOMEM;
   hr_material *m = &s->mats[s->nmats];
@@ -96,9 +96,9 @@ hr_status hr_scene_set_emit(hr_scene *s, const char *name, const double rgb[3], 
   int m = hr_scene_find_material(s, name);
   if (m < 0) return hr_err_set(err, HR_ERR_INVALID, "no material named '%s'", name);
   for (int c = 0; c < 3; c++)
-    if (!(rgb[c] >= 0 && isfinite(rgb[c])))
+    if (!(rgb[c] >= 0 && rgb[c] <= HR_EMIT_MAX))
       return hr_err_set(err, HR_ERR_INVALID,
-                        "emission of '%s' must be finite and >= 0 (got %g, %g, %g)", name, rgb[0],
+                        "emission of '%s' must be in [0, 1e30] (got %g, %g, %g)", name, rgb[0],
                         rgb[1], rgb[2]);
   for (int c = 0; c < 3; c++) s->mats[m].emit[c] = rgb[c];
   return HR_OK;
@@ -147,14 +147,18 @@ static int is_planar(const hr_vec3 *v, int n, hr_vec3 nrm, double size) {
   return 1;
 }
 
-/* 1 if the polygon turns the same way (along 'nrm') at every vertex. */
+/* 1 if the polygon turns the same way (along 'nrm') at every vertex and its turns add up to
+ * one whole turn (a pentagram turns the same way at every vertex but winds twice). */
 static int is_convex(const hr_vec3 *v, int n, hr_vec3 nrm) {
+  double turn = 0;
   for (int i = 0; i < n; i++) {
     hr_vec3 e0 = v3_sub(v[(i + 1) % n], v[i]);
     hr_vec3 e1 = v3_sub(v[(i + 2) % n], v[(i + 1) % n]);
-    if (v3_dot(v3_cross(e0, e1), nrm) <= 0) return 0;
+    double sn = v3_dot(v3_cross(e0, e1), nrm);
+    if (sn <= 0) return 0;
+    turn += atan2(sn, v3_dot(e0, e1));
   }
-  return 1;
+  return turn < 3 * M_PI; /* 2 pi for a convex polygon, 4 pi or more for a star */
 }
 
 /* Appends an input record; 0 when out of memory. */
@@ -269,6 +273,10 @@ static hr_status add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
     hr_vec3 c[3] = {v[1], v[2], v[3]}, d[3] = {v[1], v[3], v[0]};
     int ok02 = v3_dot(v3_newell(a, 3), nrm) > 0 && v3_dot(v3_newell(b, 3), nrm) > 0;
     int ok13 = v3_dot(v3_newell(c, 3), nrm) > 0 && v3_dot(v3_newell(d, 3), nrm) > 0;
+    if (!ok02 && !ok13) { /* a bow-tie: it crosses itself */
+      *res = HR_POLY_NOT_SIMPLE;
+      return HR_OK;
+    }
     int use13 = ok13 && (!ok02 || v3_len(v3_sub(v[1], v[3])) < v3_len(v3_sub(v[0], v[2])));
     if (use13) {
       st = push_surface(s, c, 3, material, poly, &added);

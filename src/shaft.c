@@ -579,7 +579,7 @@ hr_status hr_shaft_candidates(const hr_shaft_index *x, const hr_vec3 *pa, int na
     }
     i++;
   }
-  sort_ids(*out + start, *nout - start);
+  if (*nout > start) sort_ids(*out + start, *nout - start);
   return HR_OK;
 }
 

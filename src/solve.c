@@ -70,7 +70,9 @@ static hr_status check_options(const hr_options *o, hr_err *err) {
   if (!(o->b_max >= o->b_eps)) return hr_err_set(err, HR_ERR_INVALID, "--b-max must be >= --b-eps");
   if (o->rays < 1 || o->rays > 4096)
     return hr_err_set(err, HR_ERR_INVALID, "--rays must be in 1..4096");
-  if (o->threads < 0) return hr_err_set(err, HR_ERR_INVALID, "--threads must be >= 0");
+  if (o->threads < 0 || o->threads > 1024)
+    return hr_err_set(err, HR_ERR_INVALID, "--threads must be in 0..1024 (0: all cores)");
+  if (o->max_links < 0) return hr_err_set(err, HR_ERR_INVALID, "--max-links must be >= 0");
   if (o->max_iters < 1) return hr_err_set(err, HR_ERR_INVALID, "--max-iters must be >= 1");
   return HR_OK;
 }
@@ -89,6 +91,7 @@ hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solv
   if ((int64_t)scene->nsurfs > (INT64_C(1) << (64 - HR_GID_PATH_BITS)) - 1)
     return hr_err_set(err, HR_ERR_TOO_BIG, "%d surfaces: element ids hold at most %lld",
                       scene->nsurfs, (long long)((INT64_C(1) << (64 - HR_GID_PATH_BITS)) - 1));
+  if ((st = hr_vis_check_range(scene, err)) != HR_OK) return st;
   double emax = hr_scene_max_emit(scene);
   if (!(emax > 0))
     return hr_err_set(err, HR_ERR_NO_EMITTER,
@@ -365,15 +368,19 @@ static void advance(hr_solver *s, double change, int64_t nnew, int stop) {
     int many = (double)nnew * 100.0 >= (double)o->relax_links * (double)s->nlinks;
     level_done = change < o->b_max && (nnew == 0 || many);
   }
-  if (!(level_done || stop || s->iterations >= o->max_iters)) return;
-  if (at_low && strict) s->converged = 1;
-  if (stop || s->iterations >= o->max_iters || at_low) {
+  if (level_done && at_low) { /* at BF_low only strict convergence ends a level */
+    s->converged = 1;
     s->done = 1;
     return;
   }
-  /* The next level; a last step shorter than half a level goes straight to BF_low. */
-  s->bf_e = s->bf_e / o->bf_factor;
-  if (s->bf_e < o->bf_low * sqrt(o->bf_factor)) s->bf_e = o->bf_low;
+  if (level_done) {
+    /* The next level; a last step shorter than half a level goes straight to BF_low. */
+    s->bf_e = s->bf_e / o->bf_factor;
+    if (s->bf_e < o->bf_low * sqrt(o->bf_factor)) s->bf_e = o->bf_low;
+  }
+  /* Stopped early: s->bf_e is already the next iteration's, so a run resumed with a larger
+   * max_iters goes on exactly as an uninterrupted one. */
+  if (stop || s->iterations >= o->max_iters) s->done = 1;
 }
 
 hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {

@@ -191,6 +191,21 @@ hr_status hr_vis_create(const hr_scene *s, hr_vis **out, hr_err *err) {
   return HR_OK;
 }
 
+hr_status hr_vis_check_range(const hr_scene *s, hr_err *err) {
+  hr_vec3 lo, hi;
+  hr_scene_bounds(s, &lo, &hi);
+  double size = v3_len(v3_sub(hi, lo));
+  double mag = fmax(fmax(fmax(fabs(lo.x), fabs(hi.x)), fmax(fabs(lo.y), fabs(hi.y))),
+                    fmax(fabs(lo.z), fabs(hi.z)));
+  if (mag > HR_VIS_RANGE_MAX * size)
+    return hr_err_set(err, HR_ERR_INVALID,
+                      "%s: coordinates reach %g, %.0f times the scene's size %g; rays are cast in "
+                      "single precision, which loses the scene's detail beyond %g times: move "
+                      "the model near the origin",
+                      s->name, mag, mag / size, size, HR_VIS_RANGE_MAX);
+  return HR_OK;
+}
+
 double hr_vis_lift(const hr_scene *s) {
   double mag = 0;
   for (int i = 0; i < s->nsurfs; i++)

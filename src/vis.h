@@ -20,6 +20,13 @@ typedef struct hr_vis hr_vis;
 hr_status hr_vis_create(const hr_scene *s, hr_vis **out, hr_err *err);
 void hr_vis_destroy(hr_vis **v);
 
+/* Largest ratio of the scene's largest absolute coordinate to its size (bounding-box diagonal)
+ * that ray casting in float resolves: measured on the Cornell box moved away from the origin,
+ * polygon radiosities stay within 0.14% up to a ratio of 1450 and one is 7% off at 2900. */
+#define HR_VIS_RANGE_MAX 1000.0
+/* HR_ERR_INVALID, with a message, when the scene lies too far from the origin for its size. */
+hr_status hr_vis_check_range(const hr_scene *s, hr_err *err);
+
 /* Offset by which callers lift segment ends off their surfaces (along the front normal) so that
  * after rounding to float a segment cannot hit its own end surfaces and needs no skip filter:
  * 16 float epsilons of the scene's largest absolute coordinate. */

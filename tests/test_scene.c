@@ -74,6 +74,47 @@ static void nonconvex(void) {
   CHECK(res == HR_POLY_NOT_SIMPLE && s->nsurfs == 0 && s->npolys == 0 && s->ninputs == 0,
         "bow tie: res %d, %d surfaces, %d inputs", res, s->nsurfs, s->ninputs);
   hr_scene_destroy(&s);
+  /* A quad bow tie with unequal lobes (edges 0-1 and 2-3 cross): neither diagonal splits it
+   * into two triangles facing the same way. */
+  hr_vec3 bow4[4] = {tv(0, 0, 0), tv(0, 1, 0), tv(1, 0, 0), tv(2, 2, 0)};
+  s = one(bow4, 4, &res);
+  CHECK(res == HR_POLY_NOT_SIMPLE && s->nsurfs == 0 && s->ninputs == 0,
+        "quad bow tie: res %d, %d surfaces", res, s->nsurfs);
+  hr_scene_destroy(&s);
+  /* A pentagram turns left at every vertex but winds twice: not convex, and crossing itself. */
+  hr_vec3 pent[5];
+  for (int k = 0; k < 5; k++) pent[k] = tv(cos(4 * M_PI * k / 5), sin(4 * M_PI * k / 5), 0);
+  s = one(pent, 5, &res);
+  CHECK(res == HR_POLY_NOT_SIMPLE && s->nsurfs == 0 && s->ninputs == 0,
+        "pentagram: res %d, %d surfaces", res, s->nsurfs);
+  hr_scene_destroy(&s);
+}
+
+/* A unit box (floor emitting) moved 'off' along every axis; returns hr_solver_create's status. */
+static hr_status far_box(double off) {
+  hr_scene *s;
+  hr_scene_create("far", &s);
+  int m = t_mat(s, "m", 0.5, 0), e = t_mat(s, "e", 0.5, 1);
+  hr_poly_result res;
+  hr_vec3 q[4] = {tv(off, off, off), tv(off + 1, off, off), tv(off + 1, off + 1, off),
+                  tv(off, off + 1, off)};
+  hr_scene_add_polygon(s, q, 4, e, &res);
+  hr_vec3 c[4] = {q[3], q[2], q[1], q[0]};
+  for (int k = 0; k < 4; k++) c[k].z += 1;
+  hr_scene_add_polygon(s, c, 4, m, &res);
+  hr_solver *sv = NULL;
+  hr_err err = {0};
+  hr_status st = hr_solver_create(s, NULL, &sv, &err);
+  if (st != HR_OK) CHECK(strstr(err.msg, "near the origin") != NULL, "message: %s", err.msg);
+  hr_solver_destroy(&sv);
+  hr_scene_destroy(&s);
+  return st;
+}
+
+static void far_from_origin(void) {
+  printf("scenes far from the origin for their size\n");
+  CHECK(far_box(100) == HR_OK, "a unit box at 100 is refused");
+  CHECK(far_box(1e4) == HR_ERR_INVALID, "a unit box at 1e4 is solved in float");
 }
 
 static void large_convex(void) {
@@ -94,6 +135,7 @@ static void large_convex(void) {
 
 int main(void) {
   nonconvex();
+  far_from_origin();
   large_convex();
   return t_done("test_scene");
 }
