@@ -199,11 +199,10 @@ static void gather(hr_solver *s) {
   }
 }
 
-/* Push 'down' (gathered at ancestors: RGB, Gu, Gf) to the leaves, pull area-weighted B back up. Writes the new
- * B of 'idx' into 'bout', the smallest and largest leaf radiosity below it (largest channel) into
- * range[0..1] the smallest and largest radiosity of its leaves (largest channel) and their
- * difference into s->bvar, and returns the largest change of B over leaves
- * below. Reads the previous B of the element before overwriting it. */
+/* Push 'down' (gathered at ancestors: RGB, Gu, Gf) to the leaves, pull area-weighted B back
+ * up. Writes the new B of 'idx' into 'bout', the smallest and largest radiosity of its leaves
+ * (largest channel) into range[0..1] and their difference into s->bvar, and returns the largest
+ * change of B over the leaves below. Reads the previous B of an element before overwriting it. */
 static double pushpull(hr_solver *s, int32_t idx, const double down[5], double bout[3],
                        double range[2]) {
   const hr_elem *e = &s->el[idx];
@@ -358,8 +357,20 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
 static void advance(hr_solver *s, double change, int64_t nnew, int stop) {
   const hr_options *o = &s->opt;
   const int at_low = s->bf_e <= o->bf_low * (1 + 1e-12);
-  /* Strict convergence ({16}, and {18} at BF_low): B settled and no link refined. */
-  const int strict = change < o->b_eps && nnew == 0;
+  /* Strict convergence ({16}, and {18} at BF_low): B settled and no link refined. At BF_low,
+   * "settled" means the error left, not the last step: the iteration contracts by about
+   * q = change / previous change, so the remaining error is about change q / (1 - q), which
+   * is far larger than the last step when little light is absorbed (q near 1: white rooms).
+   * Stopping on the step alone left a closed box of rho = 1 walls 5% dark. */
+  int strict = change < o->b_eps && nnew == 0;
+  if (at_low) {
+    const double prev = s->prev_change;
+    s->prev_change = nnew == 0 ? change : 0;
+    if (strict && change > 0) {
+      const double q = prev > 0 ? change / prev : 1;
+      strict = q < 1 && change * q / (1 - q) < o->b_eps;
+    }
+  }
   int level_done = strict;
   if (o->relax && !at_low) {
     /* Section 2.2.4: at an intermediate level, a change below B_max counts as approximately

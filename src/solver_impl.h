@@ -105,6 +105,7 @@ struct hr_solver {
   int done;           /* the last iteration has run */
   int stopped;        /* the caller's callback stopped the run */
   double bf_e;        /* BF_e of the next iteration */
+  double prev_change; /* the last iteration's change at BF_low if it made no links, else 0 */
   /* counters */
   int64_t rays, initial_links;
   int iterations, converged, threads;
