@@ -6,13 +6,13 @@
  * vertices and the current face in growable arrays, and does no allocation per line, so the
  * 69k-triangle conference room parses in a few tens of milliseconds.
  *
- * Accepted OBJ: `v x y z [w ...]` (every number must be finite; extra components such as vertex
- * colours are ignored), `f` with >= 3 references of the forms `v`, `v/vt`, `v//vn`, `v/vt/vn`
- * (negative = relative to the vertices read so far; vt/vn are checked for syntax only),
- * `usemtl NAME`, `mtllib FILE`, `#` comments, LF or CRLF line ends, a leading UTF-8 byte order
- * mark, and a backslash at the end of a line joining it with the next. Material and file names
- * are the rest of the line, trimmed, so they may contain spaces and '#'. On numeric statements a
- * '#' token starts a comment.
+ * Accepted OBJ: `v x y z [w ...]` (every number must be finite, and x, y, z at most 1e12 in
+ * magnitude, see "Range" below; extra components such as vertex colours are ignored), `f` with >= 3
+ * references of the forms `v`, `v/vt`, `v//vn`, `v/vt/vn` (negative = relative to the vertices read
+ * so far; vt/vn are checked for syntax only), `usemtl NAME`, `mtllib FILE`, `#` comments, LF or
+ * CRLF line ends, a leading UTF-8 byte order mark, and a backslash at the end of a line joining it
+ * with the next. Material and file names are the rest of the line, trimmed, so they may contain
+ * spaces and '#'. On numeric statements a '#' token starts a comment.
  * `g o s vt vn vp l p` and the free-form curve/surface statements are ignored silently; other
  * unknown statements are ignored with one warning per keyword (at most 32 different keywords).
  *
@@ -27,23 +27,36 @@
  *    the whole line counts as the one missing name). A library that cannot be opened gives the
  *    warning "PATH:LINE: cannot open material library 'X'; using grey default" and loading
  *    continues.
+ *  - `Ke` components are 0 or between 1e-30 and 1e30 (an error at that MTL line otherwise): the
+ *    solver is linear in E, but E times areas (up to 1e24, below) must neither overflow nor
+ *    underflow: `Ke 1e300` on a scene of size 1e14 gave infinite radiosities with exit status 0.
  *  - `usemtl` of a name no library defined creates a grey material (rho 0.5, E 0) with that
  *    name and warns once per name ("PATH:LINE: unknown material 'X'; using grey default").
  *  - faces before any `usemtl` use a material named "default" (rho 0.5, E 0), created only when
  *    such a face exists (or the library's own "default" if one defines it).
  * Polygons: hr_scene_add_polygon splits them; degenerate ones are skipped with the warning
- * "PATH:LINE: degenerate polygon skipped", non-planar ones with more than 4 vertices are an
- * error. A face whose set of vertex positions (sorted, repeated positions counted once, compared
- * exactly) equals that of an earlier polygon facing the same way (positive dot product of their
- * Newell normals) is a duplicate: it is skipped with the warning "PATH:LINE: duplicate of the
- * polygon on line N; skipped" (the Cornell box data repeats a side face of each box as its
- * "bottom"; two coincident surfaces would count that area twice). The material does not matter.
- * A face with the same positions but the opposite facing is kept: back to back, the two make a
- * two-sided panel, which one-sided surfaces can only model that way. Found through a hash table
- * of the sorted positions: O(total face vertices). A file without any surviving polygon is an
- * error ("PATH: no polygons"). Emitters are not required here (the solver checks). Numbers are
- * read with strtod, so the caller must not have switched LC_NUMERIC to a locale with a decimal
- * comma.
+ * "PATH:LINE: degenerate polygon skipped"; non-planar ones with more than 4 vertices, ones that are
+ * not simple (edges crossing, a vertex revisited) and non-convex ones with more than HR_EAR_MAX
+ * vertices are errors at their line. A face whose set of vertex positions (sorted, repeated
+ * positions counted once, compared exactly) equals that of an earlier polygon facing the same way
+ * (positive dot product of their Newell normals) is a duplicate: it is skipped with the warning
+ * "PATH:LINE: duplicate of the polygon on line N; skipped" (the Cornell box data repeats a side
+ * face of each box as its "bottom"; two coincident surfaces would count that area twice). The
+ * material does not matter. A face with the same positions but the opposite facing is kept: back to
+ * back, the two make a two-sided panel, which one-sided surfaces can only model that way. Found
+ * through a hash table of the sorted positions: O(total face vertices). A file without any
+ * surviving polygon is an error ("PATH: no polygons"). Emitters are not required here (the solver
+ * checks). Numbers are read with strtod, so the caller must not have switched LC_NUMERIC to a
+ * locale with a decimal comma.
+ * Range (found with the checks of the fuzz targets in tests/fuzz, and by solving scaled copies of a
+ * box): a coordinate beyond +-1e12 is an error at its `v` line ("PATH:LINE: coordinate X out of
+ * range (magnitude at most 1e+12)"). Areas and normals square the coordinates in double precision
+ * (at 1e100 the area was infinite), and Embree's single-precision ray-triangle test multiplies
+ * three lengths (FLT_MAX = 3.4e38): a box scaled to 1e13 solved 4% off, to 1e12 it matched the unit
+ * box. No real scene, in metres or millimetres, comes near 1e12. A face whose vertices all lie
+ * within 1e-30 of its first vertex on every axis is degenerate (skipped with the warning
+ * "PATH:LINE: degenerate polygon skipped (extent X below 1e-30)"): squares of such sizes underflow,
+ * which gave normals of length 1.0000056 (extent 1e-80) or silently zero areas.
  */
 #include "hrad.h"
 #include "vec.h"
@@ -59,6 +72,13 @@
 #include <unistd.h>
 
 #define MAX_WARNED_KEYWORDS 32
+/* Range of geometry (see the file comment): the largest coordinate magnitude, and the smallest
+ * face extent below which a face counts as degenerate. */
+#define COORD_MAX 1e12
+#define FACE_EXTENT_MIN 1e-30
+/* Range of emitted radiosity, other than 0 (see the file comment). */
+#define KE_MIN 1e-30
+#define KE_MAX 1e30
 
 /* One parse of one OBJ file (plus its MTL libraries). */
 typedef struct obj_ctx {
@@ -83,6 +103,11 @@ typedef struct obj_ctx {
   size_t cap_rtab;
   hr_vec3 *sorted; /* scratch: the current face's sorted positions */
   size_t cap_sorted;
+  /* hr_scene_parse_obj_mtl: mtllib never touches the disk; every library is 'mem_mtl' (NULL:
+   * none can be opened) */
+  int mem_mode;
+  const char *mem_mtl;
+  size_t mem_mtl_len;
 } obj_ctx;
 
 typedef struct face_rec {
@@ -217,11 +242,23 @@ static hr_status read_numbers(obj_ctx *c, const char *file, long line, char *p, 
 /* ---------------------------------------------------------------- files */
 
 /* Reads the whole file into a fresh NUL-terminated buffer. On failure returns 0 with '*errnum'
- * set and '*at_open' telling whether opening (1) or reading (0) failed. */
+ * set and '*at_open' telling whether opening (1) or reading (0) failed, or 2 (errnum 0) for a
+ * path that is not a regular file: a FIFO would block the open for ever and /dev/zero never ends,
+ * so only regular files are read (checked before opening). */
 static int read_whole(const char *path, char **buf, size_t *len, int *errnum, int *at_open) {
   *buf = NULL;
   *len = 0;
   *at_open = 1;
+  struct stat pst;
+  if (stat(path, &pst) != 0) {
+    *errnum = errno;
+    return 0;
+  }
+  if (!S_ISREG(pst.st_mode)) {
+    *errnum = 0;
+    *at_open = 2;
+    return 0;
+  }
   FILE *f = fopen(path, "rb");
   if (!f) {
     *errnum = errno;
@@ -322,6 +359,9 @@ static hr_status parse_color(obj_ctx *c, const char *mpath, long line, const cha
     if (!is_kd && !(rgb[k] >= 0))
       return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: Ke must not be negative (Ke %g)", mpath,
                         line, rgb[k]);
+    if (!is_kd && rgb[k] != 0 && !(rgb[k] >= KE_MIN && rgb[k] <= KE_MAX))
+      return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: Ke must be 0 or in [%g,%g] (Ke %g)", mpath,
+                        line, KE_MIN, KE_MAX, rgb[k]);
   }
   return HR_OK;
 }
@@ -380,7 +420,20 @@ static hr_status load_mtl(obj_ctx *c, long line, const char *name, size_t nl, in
   size_t len;
   int errnum, at_open;
   hr_status st = HR_OK;
-  if (read_whole(mpath, &buf, &len, &errnum, &at_open)) {
+  if (c->mem_mode) {
+    /* the library text comes from memory: a fresh mutable copy per mtllib statement */
+    if (c->mem_mtl) {
+      buf = c->mem_mtl_len < SIZE_MAX ? malloc(c->mem_mtl_len + 1) : NULL;
+      if (!buf) st = hr_err_set(c->err, HR_ERR_NOMEM, "%s: out of memory", mpath);
+      else {
+        if (c->mem_mtl_len) memcpy(buf, c->mem_mtl, c->mem_mtl_len);
+        buf[c->mem_mtl_len] = '\0';
+        *opened = 1;
+        st = parse_mtl(c, mpath, buf, c->mem_mtl_len);
+        free(buf);
+      }
+    }
+  } else if (read_whole(mpath, &buf, &len, &errnum, &at_open)) {
     *opened = 1;
     st = parse_mtl(c, mpath, buf, len);
     free(buf);
@@ -398,6 +451,11 @@ static hr_status do_mtllib(obj_ctx *c, long line, char *rest) {
   int opened;
   hr_status st = load_mtl(c, line, rest, strlen(rest), &opened);
   if (st != HR_OK || opened) return st;
+  if (c->mem_mode) { /* no library in memory: nothing to look for on the disk either */
+    hr_log_warn(c->log, "%s:%ld: cannot open material library '%s'; using grey default", c->path,
+                line, rest);
+    return HR_OK;
+  }
   /* several names, or one name with blanks that does not exist: if no word names a readable
    * file either, report the whole line as one missing library */
   int readable = 0;
@@ -450,6 +508,11 @@ static hr_status do_vertex(obj_ctx *c, long line, char *p) {
   if (n < 3)
     return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: vertex needs 3 coordinates, got %d", c->path,
                       line, n);
+  for (int k = 0; k < 3; k++)
+    if (!(fabs(x[k]) <= COORD_MAX))
+      return hr_err_set(c->err, HR_ERR_PARSE,
+                        "%s:%ld: coordinate %g out of range (magnitude at most %g)", c->path, line,
+                        x[k], COORD_MAX);
   if (!grow((void **)&c->verts, &c->cap_verts, c->nverts + 1, sizeof *c->verts))
     return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
   c->verts[c->nverts++] = (hr_vec3){x[0], x[1], x[2]};
@@ -592,10 +655,13 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
       return hr_err_set(c->err, HR_ERR_PARSE,
                         "%s:%ld: vertex index 0 is invalid (indices start at 1)", c->path, line);
     long long abs_i = vi > 0 ? vi : (long long)c->nverts + vi + 1;
-    if (abs_i < 1 || abs_i > (long long)c->nverts)
+    if (abs_i < 1 || abs_i > (long long)c->nverts) {
+      /* the index as written (parse_int clamps beyond 18 digits) */
+      size_t il = (*p == '-' || *p == '+') + strspn(p + (*p == '-' || *p == '+'), "0123456789");
       return hr_err_set(c->err, HR_ERR_PARSE,
-                        "%s:%ld: vertex index %lld out of range (%zu vertices so far)", c->path,
-                        line, vi, c->nverts);
+                        "%s:%ld: vertex index %.*s out of range (%zu vertices so far)", c->path,
+                        line, shown(il), p, c->nverts);
+    }
     if (!grow((void **)&c->face, &c->cap_face, n + 1, sizeof *c->face))
       return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
     c->face[n++] = c->verts[abs_i - 1];
@@ -611,6 +677,28 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
     c->cur_mat = find_or_add_material(c->s, "default", &added);
     if (c->cur_mat < 0)
       return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
+  }
+  /* a face too small for the arithmetic of hr_scene_add_polygon (its area or normal would
+   * underflow) is degenerate; it is recorded as such by adding it collapsed to its first vertex */
+  double ext = 0;
+  for (size_t i = 1; i < n; i++) {
+    hr_vec3 d = v3_sub(c->face[i], c->face[0]);
+    ext = fmax(ext, fmax(fabs(d.x), fmax(fabs(d.y), fabs(d.z))));
+  }
+  if (ext < FACE_EXTENT_MIN) {
+    for (size_t i = 1; i < n; i++) c->face[i] = c->face[0];
+    hr_poly_result res;
+    hr_status st = hr_scene_add_polygon(c->s, c->face, (int)n, c->cur_mat, &res);
+    if (st == HR_ERR_NOMEM) return hr_err_set(c->err, st, "%s:%ld: out of memory", c->path, line);
+    if (st != HR_OK || res != HR_POLY_DEGENERATE)
+      return hr_err_set(c->err, st != HR_OK ? st : HR_ERR_INVALID, "%s:%ld: invalid polygon",
+                        c->path, line);
+    if (ext > 0)
+      hr_log_warn(c->log, "%s:%ld: degenerate polygon skipped (extent %g below %g)", c->path, line,
+                  ext, FACE_EXTENT_MIN);
+    else
+      hr_log_warn(c->log, "%s:%ld: degenerate polygon skipped", c->path, line);
+    return HR_OK;
   }
   size_t m;
   uint64_t hash;
@@ -634,6 +722,17 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
   else if (res == HR_POLY_NONPLANAR)
     return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: non-planar polygon with %zu vertices", c->path,
                       line, n);
+  else if (res == HR_POLY_NOT_SIMPLE && n > HR_EAR_MAX)
+    return hr_err_set(c->err, HR_ERR_PARSE,
+                      "%s:%ld: non-convex polygon with %zu vertices (at most %d are triangulated)",
+                      c->path, line, n, HR_EAR_MAX);
+  else if (res == HR_POLY_NOT_SIMPLE)
+    return hr_err_set(c->err, HR_ERR_PARSE,
+                      "%s:%ld: polygon with %zu vertices is not simple (its edges cross, or it "
+                      "revisits a vertex)",
+                      c->path, line, n);
+  else if (res != HR_POLY_ADDED)
+    return hr_err_set(c->err, HR_ERR_INVALID, "%s:%ld: invalid polygon", c->path, line);
   else if (!record_face(c, m, hash, nrm, line, c->s->npolys - 1))
     return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
   return HR_OK;
@@ -717,15 +816,20 @@ static char *scene_name(const char *path) {
   return r;
 }
 
-/* Parses mutable NUL-terminated 'buf' (len bytes, owned by the caller) named 'path'. */
+/* Parses mutable NUL-terminated 'buf' (len bytes, owned by the caller) named 'path'. With
+ * 'mem_mode', mtllib statements read 'mtl' (mlen bytes; NULL: no library) instead of files. */
 static hr_status parse_owned(char *buf, size_t len, const char *path, const hr_log *log,
-                             hr_scene **out, hr_err *err) {
+                             int mem_mode, const char *mtl, size_t mlen, hr_scene **out,
+                             hr_err *err) {
   obj_ctx c;
   memset(&c, 0, sizeof c);
   c.path = path;
   c.log = log;
   c.err = err;
   c.cur_mat = -1;
+  c.mem_mode = mem_mode;
+  c.mem_mtl = mtl;
+  c.mem_mtl_len = mlen;
   char *name = scene_name(path);
   if (!name || hr_scene_create(name, &c.s) != HR_OK) {
     free(name);
@@ -748,9 +852,11 @@ static hr_status parse_owned(char *buf, size_t len, const char *path, const hr_l
   return HR_OK;
 }
 
-hr_status hr_scene_parse_obj(const char *buf, size_t len, const char *path, const hr_log *log,
-                             hr_scene **out, hr_err *err) {
-  if (!out) return hr_err_set(err, HR_ERR_INVALID, "hr_scene_parse_obj: no output pointer");
+/* Copies the OBJ text and parses it (hr_scene_parse_obj and hr_scene_parse_obj_mtl). */
+static hr_status parse_copy(const char *fn, const char *buf, size_t len, int mem_mode,
+                            const char *mtl, size_t mlen, const char *path, const hr_log *log,
+                            hr_scene **out, hr_err *err) {
+  if (!out) return hr_err_set(err, HR_ERR_INVALID, "%s: no output pointer", fn);
   *out = NULL;
   if (!path) path = "<obj>";
   if (!buf && len > 0) return hr_err_set(err, HR_ERR_INVALID, "%s: no text", path);
@@ -759,9 +865,24 @@ hr_status hr_scene_parse_obj(const char *buf, size_t len, const char *path, cons
   if (!copy) return hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
   if (len) memcpy(copy, buf, len);
   copy[len] = '\0';
-  hr_status st = parse_owned(copy, len, path, log, out, err);
+  hr_status st = parse_owned(copy, len, path, log, mem_mode, mtl, mlen, out, err);
   free(copy);
   return st;
+}
+
+hr_status hr_scene_parse_obj(const char *buf, size_t len, const char *path, const hr_log *log,
+                             hr_scene **out, hr_err *err) {
+  return parse_copy("hr_scene_parse_obj", buf, len, 0, NULL, 0, path, log, out, err);
+}
+
+hr_status hr_scene_parse_obj_mtl(const char *obj, size_t olen, const char *mtl, size_t mlen,
+                                 const char *path, const hr_log *log, hr_scene **out,
+                                 hr_err *err) {
+  if (!mtl && mlen > 0) {
+    if (out) *out = NULL;
+    return hr_err_set(err, HR_ERR_INVALID, "%s: no material library text", path ? path : "<obj>");
+  }
+  return parse_copy("hr_scene_parse_obj_mtl", obj, olen, 1, mtl, mlen, path, log, out, err);
 }
 
 hr_status hr_scene_load_obj(const char *path, const hr_log *log, hr_scene **out, hr_err *err) {
@@ -773,10 +894,11 @@ hr_status hr_scene_load_obj(const char *path, const hr_log *log, hr_scene **out,
   int errnum, at_open;
   if (!read_whole(path, &buf, &len, &errnum, &at_open)) {
     if (errnum == ENOMEM) return hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
+    if (at_open == 2) return hr_err_set(err, HR_ERR_IO, "%s: not a regular file", path);
     return hr_err_set(err, HR_ERR_IO, "%s: cannot %s: %s", path, at_open ? "open" : "read",
                       strerror(errnum));
   }
-  hr_status st = parse_owned(buf, len, path, log, out, err);
+  hr_status st = parse_owned(buf, len, path, log, 0, NULL, 0, out, err);
   free(buf);
   return st;
 }

@@ -398,6 +398,155 @@ static void test_degenerate(void) {
   CHECK(lc.ndegen == 1, "%d degenerate warnings", lc.ndegen);
 }
 
+/* Found by fuzzing (tests/fuzz/crashes/obj): faces so small that the squares in the area and
+ * normal computation underflow (extent near 1e-80 gave a normal of length 1.0000056) are
+ * degenerate below an extent of 1e-30; coordinates up to 1e12 in magnitude are accepted. */
+static void test_range(void) {
+  logcap lc = {0};
+  hr_log log = {cap_fn, &lc};
+  hr_err err;
+  hr_scene *s = NULL;
+  const char *tiny =
+      "v 1e-80 0 0\nv 0 1e-80 0\nv 0 0 0\nf 1 2 3\n"  /* 4: skipped */
+      "v 1e-29 0 0\nv 0 1e-29 0\nf 3 4 5\n"            /* 7: kept, area 5e-59 */
+      "v 1 0 0\nv 0 1 0\nf 3 6 7\n";                   /* 10: kept */
+  hr_status st = hr_scene_parse_obj(tiny, strlen(tiny), "tiny.obj", &log, &s, &err);
+  CHECK(st == HR_OK, "tiny: status %d: %s", st, err.msg);
+  CHECK(lc.n == 1 && lc.ndegen == 1 &&
+            count_msgs(&lc, "tiny.obj:4: degenerate polygon skipped (extent 1e-80 below 1e-30)") ==
+                1,
+        "tiny: %d warnings, first: %s", lc.n, lc.msg[0]);
+  if (s) {
+    CHECK(s->npolys == 2 && s->nsurfs == 2 && s->ninputs == 3, "tiny: npolys %d nsurfs %d",
+          s->npolys, s->nsurfs);
+    CHECK(s->ninputs == 3 && s->inputs[0].kind == HR_INPUT_DEGENERATE && s->inputs[0].poly == -1 &&
+              s->inputs[1].kind == HR_INPUT_SOLVED && s->inputs[1].poly == 0,
+          "tiny: input rows");
+    for (int i = 0; i < s->nsurfs; i++) {
+      const hr_surface *f = &s->surfs[i];
+      double nl = sqrt(f->normal.x * f->normal.x + f->normal.y * f->normal.y +
+                       f->normal.z * f->normal.z);
+      CHECK(fabs(nl - 1) <= 1e-12 && f->area > 0, "tiny: surface %d normal length %.17g area %g",
+            i, nl, f->area);
+    }
+    if (s->nsurfs == 2) CHECK(NEAR(s->surfs[0].area, 5e-59, 1e-70), "area %g", s->surfs[0].area);
+  }
+  hr_scene_destroy(&s);
+
+  /* the largest coordinates accepted: finite area and a unit normal; the extreme Ke accepted */
+  const char *huge =
+      "v 1e12 -1e12 0\nv 1e12 1e12 0\nv -1e12 1e12 0\nv 0 0 1e12\nf 1 2 3\nf 1 2 4\n";
+  lc = (logcap){0};
+  st = hr_scene_parse_obj(huge, strlen(huge), "huge.obj", &log, &s, &err);
+  CHECK(st == HR_OK && lc.n == 0, "huge: status %d: %s", st, err.msg);
+  if (s) {
+    CHECK(s->nsurfs == 2 && NEAR(s->surfs[0].area, 2e24, 1e10) &&
+              NEAR(s->surfs[0].normal.z, 1, 1e-15),
+          "huge: area %g normal z %g", s->nsurfs ? s->surfs[0].area : 0,
+          s->nsurfs ? s->surfs[0].normal.z : 0);
+    for (int i = 0; i < s->nsurfs; i++) CHECK(isfinite(s->poly_area[s->surfs[i].poly]), "huge");
+  }
+  hr_scene_destroy(&s);
+  /* a non-convex polygon with more vertices than are triangulated: an error, not a lost face */
+  int nv = HR_EAR_MAX + 2;
+  size_t cap = (size_t)nv * 64 + 64, k = 0;
+  char *big = malloc(cap);
+  for (int i = 0; i < nv; i++) {
+    double a = 2 * M_PI * i / nv, r = i == nv / 2 ? 0.5 : 1; /* one vertex pulled in */
+    k += (size_t)snprintf(big + k, cap - k, "v %.17g %.17g 0\n", r * cos(a), r * sin(a));
+  }
+  k += (size_t)snprintf(big + k, cap - k, "f");
+  for (int i = 1; i <= nv; i++) k += (size_t)snprintf(big + k, cap - k, " %d", i);
+  k += (size_t)snprintf(big + k, cap - k, "\n");
+  st = hr_scene_parse_obj(big, k, "ear.obj", NULL, &s, &err);
+  char want[200];
+  snprintf(want, sizeof want, "ear.obj:%d: non-convex polygon with %d vertices (at most %d", nv + 1,
+           nv, HR_EAR_MAX);
+  CHECK(st == HR_ERR_PARSE && s == NULL && strncmp(err.msg, want, strlen(want)) == 0,
+        "ear limit: %d '%s'", st, err.msg);
+  hr_scene_destroy(&s);
+  free(big);
+
+  const char *ke_obj = "mtllib k.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl k\nf 1 2 3\n";
+  const char *ke_mtl = "newmtl k\nKe 1e30 1e-30 0\n";
+  st = hr_scene_parse_obj_mtl(ke_obj, strlen(ke_obj), ke_mtl, strlen(ke_mtl), "ke.obj", NULL, &s,
+                              &err);
+  CHECK(st == HR_OK && s && s->mats[0].emit[0] == 1e30 && s->mats[0].emit[1] == 1e-30,
+        "Ke limits: status %d: %s", st, err.msg);
+  hr_scene_destroy(&s);
+}
+
+/* hr_scene_parse_obj_mtl: every mtllib reads the MTL text from memory (even when a file of that
+ * name exists), errors name the library as a file would be named; without MTL text no file is
+ * read either. */
+static void test_parse_obj_mtl(void) {
+  write_file("lib.mtl", "newmtl lamp\nKd 0.1\nKe 9\n"); /* on the disk: must not be read */
+  char path[600];
+  snprintf(path, sizeof path, "%s/mem.obj", tmpdir);
+  const char *obj = "mtllib lib.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl lamp\nf 1 2 3\n";
+  const char *mtl = "newmtl lamp\r\nKd 0.25 0.5 0.75\r\nKe 1 2 3";
+  logcap lc = {0};
+  hr_log log = {cap_fn, &lc};
+  hr_err err;
+  hr_scene *s = NULL;
+  hr_status st = hr_scene_parse_obj_mtl(obj, strlen(obj), mtl, strlen(mtl), path, &log, &s, &err);
+  CHECK(st == HR_OK && lc.n == 0, "memory MTL: status %d: %s; %d warnings", st, err.msg, lc.n);
+  if (s) {
+    CHECK(s->nmats == 1 && strcmp(s->mats[0].name, "lamp") == 0 && s->mats[0].rho[2] == 0.75 &&
+              s->mats[0].emit[1] == 2,
+          "memory MTL: material %s rho %g emit %g", s->mats[0].name, s->mats[0].rho[2],
+          s->mats[0].emit[1]);
+    CHECK(strcmp(s->name, "mem") == 0, "name '%s'", s->name);
+  }
+  hr_scene_destroy(&s);
+
+  /* an error in the MTL names it as the file DIR/lib.mtl */
+  const char *bad = "newmtl lamp\nKd 2 2 2\n";
+  st = hr_scene_parse_obj_mtl(obj, strlen(obj), bad, strlen(bad), path, &log, &s, &err);
+  char want[700];
+  snprintf(want, sizeof want, "%s/lib.mtl:2: rho must be in [0,1] (Kd 2)", tmpdir);
+  CHECK(st == HR_ERR_PARSE && s == NULL && strcmp(err.msg, want) == 0, "bad MTL: %d '%s'", st,
+        err.msg);
+
+  /* no MTL text: a warning, grey materials, and lib.mtl on the disk is not read */
+  lc = (logcap){0};
+  st = hr_scene_parse_obj_mtl(obj, strlen(obj), NULL, 0, path, &log, &s, &err);
+  CHECK(st == HR_OK, "no MTL: status %d: %s", st, err.msg);
+  CHECK(lc.n == 2 && count_msgs(&lc, "mem.obj:1: cannot open material library 'lib.mtl'; using "
+                                     "grey default") == 1 &&
+            count_msgs(&lc, "mem.obj:5: unknown material 'lamp'") == 1,
+        "no MTL: %d warnings, first: %s", lc.n, lc.msg[0]);
+  if (s) CHECK(s->nmats == 1 && s->mats[0].rho[0] == 0.5 && s->mats[0].emit[0] == 0, "no MTL");
+  hr_scene_destroy(&s);
+
+  /* several names on one mtllib line: the one text, read once; two statements read it twice
+   * (the second definition wins, as for files) */
+  const char *two =
+      "mtllib a.mtl b.mtl\nmtllib c.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl m\nf 1 2 3\n";
+  const char *m = "newmtl m\nKd 0.3\n";
+  lc = (logcap){0};
+  st = hr_scene_parse_obj_mtl(two, strlen(two), m, strlen(m), "two.obj", &log, &s, &err);
+  CHECK(st == HR_OK && lc.n == 0 && s && s->nmats == 1 && s->mats[0].rho[0] == 0.3,
+        "two mtllib: status %d: %s; %d warnings", st, err.msg, lc.n);
+  hr_scene_destroy(&s);
+
+  /* same results as hr_scene_parse_obj for a file without mtllib; argument errors */
+  const char *plain = "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n";
+  hr_scene *a = NULL;
+  st = hr_scene_parse_obj_mtl(plain, strlen(plain), NULL, 0, "p.obj", NULL, &s, &err);
+  hr_status sa = hr_scene_parse_obj(plain, strlen(plain), "p.obj", NULL, &a, &err);
+  CHECK(st == HR_OK && sa == HR_OK && s && a && same_geometry(a, s), "plain: %d %d", st, sa);
+  hr_scene_destroy(&s);
+  hr_scene_destroy(&a);
+  s = (hr_scene *)&lc;
+  st = hr_scene_parse_obj_mtl(plain, strlen(plain), NULL, 5, "p.obj", NULL, &s, &err);
+  CHECK(st == HR_ERR_INVALID && s == NULL, "NULL MTL with a length: %d", st);
+  CHECK(hr_scene_parse_obj_mtl(plain, strlen(plain), NULL, 0, "p.obj", NULL, NULL, &err) ==
+            HR_ERR_INVALID,
+        "no output pointer");
+  remove(write_file("lib.mtl", ""));
+}
+
 static void test_missing_mtl(void) {
   logcap lc = {0};
   hr_err err;
@@ -485,6 +634,19 @@ static void test_bad_inputs(void) {
        "usemtl needs"},
       {"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999999\n", NULL, HR_ERR_PARSE, "bad.obj",
        4, "out of range"},
+      /* a face revisiting its vertices (HR_POLY_NOT_SIMPLE) vanished without a trace */
+      {"v 0 0.5 0\nv 1 0.5 0\nv 1 0.5 1\nv 0 0.5 1\nv 0.5 0.5 2\nf 1 2 3 4 5 1 2\n", NULL,
+       HR_ERR_PARSE, "bad.obj", 6, "polygon with 7 vertices is not simple"},
+      /* found by fuzzing: coordinates whose squares overflow gave an infinite area */
+      {"v 1e100 0 0\nv 0 1e100 0\nv 0 0 0\nf 1 2 3\n", NULL, HR_ERR_PARSE, "bad.obj", 1,
+       "coordinate 1e+100 out of range (magnitude at most 1e+12)"},
+      {"v 0 0 0\nv 1 0 0\nv 0 -1.5e12 0\nf 1 2 3\n", NULL, HR_ERR_PARSE, "bad.obj", 3,
+       "coordinate -1.5e+12 out of range"},
+      /* emission so large (or small) that E times an area overflows (underflows) */
+      {"mtllib bad.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "newmtl a\nKe 0 1e31 0\n",
+       HR_ERR_PARSE, "bad.mtl", 2, "Ke must be 0 or in [1e-30,1e+30] (Ke 1e+31)"},
+      {"mtllib bad.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n", "newmtl a\nKe 1e-300\n",
+       HR_ERR_PARSE, "bad.mtl", 2, "Ke must be 0 or in [1e-30,1e+30] (Ke 1e-300)"},
   };
   int ncases = (int)(sizeof cases / sizeof cases[0]);
   for (int i = 0; i < ncases; i++) {
@@ -895,6 +1057,8 @@ int main(void) {
   test_bad_inputs();
   test_unknown_statements();
   test_duplicates();
+  test_range();
+  test_parse_obj_mtl();
   remove_tmpdir();
   if (shared_missing()) {
     printf("shared scenes: skipped (%s/scenes missing)\n", HR_SHARED_DIR);
