@@ -10,6 +10,7 @@
 #include "output.h"
 #include "vec.h"
 
+#include <errno.h>
 #include <math.h>
 #include <png.h>
 #include <stdio.h>
@@ -398,6 +399,17 @@ hr_status hr_render(const hr_scene *s, const hr_mesh *m, const hr_leaf *leaves, 
 
 /* ------------------------------------------------------------------ image writers */
 
+/* Flushes and closes 'fp' (written to 'path'); 'ok' == 0 means an earlier write failed with
+ * errno 'e'. On any failure the partial file is removed and HR_ERR_IO names the cause. */
+static hr_status close_checked(FILE *fp, const char *path, int ok, int e, hr_err *err) {
+  if (ok && fflush(fp) != 0) ok = 0, e = errno;
+  if (ok && ferror(fp)) ok = 0, e = errno ? errno : EIO;
+  if (fclose(fp) != 0 && ok) ok = 0, e = errno;
+  if (ok) return HR_OK;
+  remove(path);
+  return hr_err_set(err, HR_ERR_IO, "%s: write failed: %s", path, strerror(e ? e : EIO));
+}
+
 hr_status hr_png_write(const char *path, int w, int h, const float *rgb, double exposure,
                        hr_err *err) {
   if (!path || !rgb || w < 1 || h < 1)
@@ -416,10 +428,15 @@ hr_status hr_png_write(const char *path, int w, int h, const float *rgb, double 
   img.width = (png_uint_32)w;
   img.height = (png_uint_32)h;
   img.format = PNG_FORMAT_RGB;
+  /* libpng checks every write, the flush and the close, and removes the file on failure; its
+   * message for a failed write is only "Write Error", so the cause comes from errno */
+  errno = 0;
   int ok = png_image_write_to_file(&img, path, 0, buf, 0, NULL);
+  int e = errno;
   free(buf);
   if (!ok) {
-    hr_status st = hr_err_set(err, HR_ERR_IO, "%s: cannot write PNG (%s)", path, img.message);
+    hr_status st = e ? hr_err_set(err, HR_ERR_IO, "%s: cannot write: %s", path, strerror(e))
+                     : hr_err_set(err, HR_ERR_IO, "%s: cannot write PNG (%s)", path, img.message);
     png_image_free(&img);
     return st;
   }
@@ -429,14 +446,15 @@ hr_status hr_png_write(const char *path, int w, int h, const float *rgb, double 
 hr_status hr_pfm_write(const char *path, int w, int h, const float *rgb, hr_err *err) {
   if (!path || !rgb || w < 1 || h < 1)
     return hr_err_set(err, HR_ERR_INVALID, "hr_pfm_write: bad arguments");
-  FILE *fp = fopen(path, "wb");
-  if (!fp) return hr_err_set(err, HR_ERR_IO, "%s: cannot open for writing", path);
-  int ok = fprintf(fp, "PF\n%d %d\n-1.0\n", w, h) > 0;
   uint8_t *row = malloc((size_t)w * 12);
-  if (!row) {
-    fclose(fp);
-    return hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
+  if (!row) return hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
+  FILE *fp = fopen(path, "wb");
+  if (!fp) {
+    int e = errno;
+    free(row);
+    return hr_err_set(err, HR_ERR_IO, "%s: cannot open for writing: %s", path, strerror(e));
   }
+  int ok = fprintf(fp, "PF\n%d %d\n-1.0\n", w, h) > 0, e = ok ? 0 : errno;
   for (int y = h - 1; y >= 0 && ok; y--) {
     const float *src = &rgb[(size_t)y * w * 3];
     for (int i = 0; i < 3 * w; i++) {
@@ -448,9 +466,8 @@ hr_status hr_pfm_write(const char *path, int w, int h, const float *rgb, hr_err 
       row[4 * i + 3] = (uint8_t)(u >> 24);
     }
     ok = fwrite(row, 1, (size_t)w * 12, fp) == (size_t)w * 12;
+    if (!ok) e = errno;
   }
   free(row);
-  if (fclose(fp) != 0) ok = 0;
-  if (!ok) return hr_err_set(err, HR_ERR_IO, "%s: write failed", path);
-  return HR_OK;
+  return close_checked(fp, path, ok, e, err);
 }

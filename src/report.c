@@ -12,11 +12,32 @@ static hr_status open_out(const char *path, FILE **f, hr_err *err) {
   return HR_OK;
 }
 
+/* Checks everything written to 'f' (the stream's error flag, the flush, the close); on failure
+ * removes the partial file and names the cause. */
 static hr_status close_out(const char *path, FILE *f, hr_err *err) {
-  int bad = ferror(f);
-  if (fclose(f) != 0 || bad)
-    return hr_err_set(err, HR_ERR_IO, "%s: write failed: %s", path, strerror(errno));
-  return HR_OK;
+  int ok = 1, e = 0;
+  if (fflush(f) != 0) ok = 0, e = errno;
+  if (ok && ferror(f)) ok = 0, e = errno ? errno : EIO;
+  if (fclose(f) != 0 && ok) ok = 0, e = errno;
+  if (ok) return HR_OK;
+  remove(path);
+  return hr_err_set(err, HR_ERR_IO, "%s: write failed: %s", path, strerror(e ? e : EIO));
+}
+
+/* Writes 's' as a JSON string (quoted, with '"', '\\' and control characters escaped): scene
+ * names come from file names, which may hold any of them. */
+static void json_string(FILE *f, const char *s) {
+  fputc('"', f);
+  for (; *s; s++) {
+    unsigned char c = (unsigned char)*s;
+    if (c == '"' || c == '\\')
+      fprintf(f, "\\%c", c);
+    else if (c < 0x20 || c == 0x7f)
+      fprintf(f, "\\u%04x", c);
+    else
+      fputc(c, f);
+  }
+  fputc('"', f);
 }
 
 hr_status hr_report_csv(const char *path, const hr_solver *s, hr_err *err) {
@@ -52,7 +73,9 @@ hr_status hr_report_json(const char *path, const hr_solver *s, const hr_options 
   hr_solver_stats(s, &t);
   const hr_scene *sc = hr_solver_scene(s);
   fprintf(f, "{\n");
-  fprintf(f, "  \"scene\": \"%s\",\n", sc->name);
+  fprintf(f, "  \"scene\": ");
+  json_string(f, sc->name);
+  fprintf(f, ",\n");
   fprintf(f, "  \"surfaces\": %d,\n", t.npolys);
   fprintf(f, "  \"input_polygons\": %d,\n", sc->ninputs);
   fprintf(f, "  \"split_surfaces\": %d,\n", t.nsurfaces);

@@ -6,6 +6,7 @@
  * base64-encoded as well and handed to GLTFLoader.parse (fetch() of file:// is blocked). */
 #include "output.h"
 
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -252,10 +253,13 @@ hr_status hr_viewer_write(const char *path, const char *glb_name, hr_err *err) {
   FILE *fp = NULL;
   if (st == HR_OK) {
     fp = fopen(path, "wb");
-    if (!fp) st = hr_err_set(err, HR_ERR_IO, "%s: cannot open for writing", path);
+    if (!fp)
+      st = hr_err_set(err, HR_ERR_IO, "%s: cannot open for writing: %s", path, strerror(errno));
   }
   if (st == HR_OK) {
-    int ok = fputs(PAGE_HEAD, fp) >= 0;
+    /* Every write below is checked through the stream's error flag, the flush and the close; a
+     * failed page is removed rather than left half written. */
+    int ok = fputs(PAGE_HEAD, fp) >= 0, e = ok ? 0 : errno;
     fputs("<!--\nWritten by hrad. Embedded below (base64): three.js", fp);
     fputs(", OrbitControls, GLTFLoader and BufferGeometryUtils from the three.js distribution"
           " (MIT licence, reproduced here), and the model '",
@@ -276,9 +280,14 @@ hr_status hr_viewer_write(const char *path, const char *glb_name, hr_err *err) {
     if (ok) ok = put_b64(fp, glb, glblen);
     fputs("\";\n</script>\n", fp);
     if (ok) ok = fputs(PAGE_SCRIPT, fp) >= 0;
-    if (ferror(fp)) ok = 0;
-    if (fclose(fp) != 0) ok = 0;
-    if (!ok) st = hr_err_set(err, HR_ERR_IO, "%s: write failed", path);
+    if (!ok && !e) e = errno;
+    if (ok && fflush(fp) != 0) ok = 0, e = errno;
+    if (ok && ferror(fp)) ok = 0, e = errno ? errno : EIO;
+    if (fclose(fp) != 0 && ok) ok = 0, e = errno;
+    if (!ok) {
+      remove(path);
+      st = hr_err_set(err, HR_ERR_IO, "%s: write failed: %s", path, strerror(e ? e : EIO));
+    }
   }
   for (int i = 0; i < NMODS; i++) free(src[i]);
   free(lic);

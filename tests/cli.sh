@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The command line end to end: outputs of a real run, golden counts, identical results for any
-# thread count, snapshots, glTF validation of a real result, and bad input (one-line message
-# naming file and line, exit status 1, usage errors 2, no output files).
+# thread count, snapshots, glTF validation of a real result, bad input (one-line message naming
+# file and line, exit status 1, usage errors 2, no output files; tests/badinput.sh has the full
+# table), the output set (committed as a whole, other files in DIR kept, a killed run's staging
+# directory cleaned up), failed writes, and SIGINT/SIGTERM.
 # Usage: cli.sh HRAD_BINARY SOURCE_DIR SHARED_DIR
 set -u
 hrad=$1 src=$2 shared=$3
@@ -28,7 +30,9 @@ if "$hrad" --quiet -o "$t/c" cornell; then
   for k in init_graph refine push_pull total; do
     grep -q "\"$k\": [0-9]" "$t/c/stats.json" && ok "stats.json time_s.$k" || bad "stats.json time_s.$k"
   done
-  ls -a "$t/c" | grep -q '^\.hrad-tmp' && bad "temporary directory left behind" || ok "no temporary directory left"
+  ls -a "$t" "$t/c" | grep -q 'hrad-[0-9]' && bad "staging directory left behind" || ok "no staging directory left"
+  [ "$(grep -v '^#' "$t/c/.hrad-outputs" | sort | tr '\n' ' ')" = "$(cd "$t/c" && ls | sort | tr '\n' ' ')" ] \
+    && ok ".hrad-outputs lists the set" || bad ".hrad-outputs: $(cat "$t/c/.hrad-outputs")"
   if [ -d "$src/node_modules/gltf-validator" ]; then
     node "$src/tests/validate_glb.mjs" "$t/c/cornell.glb" > "$t/val.txt" 2>&1 && ok "cornell.glb passes glTF-Validator" \
       || { bad "cornell.glb fails glTF-Validator"; cat "$t/val.txt"; }
@@ -48,7 +52,7 @@ if "$hrad" --quiet $opts -o "$t/r1" --threads 1 room; then
   echo "     room: elements $el links $li iterations $it"
   [ "$el" = "${GOLD_ELEMENTS:-1872}" ] && ok "room elements golden ($el)" || bad "room elements $el (golden ${GOLD_ELEMENTS:-1872})"
   [ "$li" = "${GOLD_LINKS:-308511}" ] && ok "room links golden ($li)" || bad "room links $li (golden ${GOLD_LINKS:-308511})"
-  [ "$it" = "${GOLD_ITERS:-37}" ] && ok "room iterations golden ($it)" || bad "room iterations $it (golden ${GOLD_ITERS:-37})"
+  [ "$it" = "${GOLD_ITERS:-38}" ] && ok "room iterations golden ($it)" || bad "room iterations $it (golden ${GOLD_ITERS:-38})"
   for n in 2 3 4; do
     "$hrad" --quiet $opts -o "$t/r$n" --threads $n room
     cmp -s "$t/r1/surfaces.csv" "$t/r$n/surfaces.csv" && ok "room surfaces.csv identical with $n threads" \
@@ -101,8 +105,9 @@ expect() {
   rm -rf "$out"
   "$hrad" -o "$out" "$@" 2> "$t/err.txt" > /dev/null
   local st=$? lines
-  lines=$(grep -vc '^hrad: warning' "$t/err.txt")
-  if [ "$st" = "$want" ] && grep -qE -e "$pat" "$t/err.txt" && [ ! -e "$out" ] && { [ "$want" = 2 ] || [ "$lines" = 1 ]; }; then
+  lines=$(grep -v "^Try 'hrad --help'.\$" "$t/err.txt" | grep -vc '^hrad: warning')
+  if [ "$st" = "$want" ] && grep -qE -e "$pat" "$t/err.txt" && [ ! -e "$out" ] && [ "$lines" = 1 ] &&
+    ! ls -a "$t" | grep -q '^\.bad-out\.hrad-'; then
     ok "exit $want: $(grep -v '^hrad: warning' "$t/err.txt" | head -1)"
   else
     bad "args '$*': status $st (want $want), dir exists: $([ -e "$out" ] && echo yes || echo no), stderr: $(cat "$t/err.txt")"
@@ -127,9 +132,14 @@ expect 1 "^hrad: .*no emitting surface" "$t/nomtl.obj"
 expect 1 "^hrad: unknown scene 'nosuch'" nosuch
 expect 2 "unknown option '--frobnicate'" --frobnicate room
 expect 2 "--rays: not a number" --rays many room
-expect 1 "rays must be in" --rays 0 room
-expect 2 "--verify: expected a whole number" --verify 0 room
-expect 2 "--verify-image: expected a whole number" --verify-image 2.5 room
+expect 2 "--rays must be a whole number in 1..4096" --rays 0 room
+expect 2 "--threads must be a whole number" --threads 1e10 room
+expect 2 "--bf-factor must be > 1" --bf-factor 1 room
+expect 2 "--verify must be a whole number" --verify 0 room
+expect 2 "--verify-image must be a whole number" --verify-image 2.5 room
+expect 2 "--size: expected WxH" --size 200x150junk room
+expect 2 "--emit: radiosity must be" --emit light=inf,0,0 room
+expect 2 "-o /proc/.*: cannot write in /proc" -o /proc/hrad-cli-test room
 expect 1 "no material named 'nosuch'" --emit nosuch=1,1,1 room
 # Degenerate polygons are skipped with a warning naming the line; the run succeeds.
 if "$hrad" -o "$t/degen-out" "$t/degen.obj" 2> "$t/err.txt" >/dev/null && grep -q "degen.obj:15: degenerate" "$t/err.txt"; then
@@ -140,12 +150,164 @@ fi
 # A missing MTL is a warning (grey default), documented in obj.c.
 "$hrad" -o "$t/nomtl-out" "$t/nomtl.obj" 2> "$t/err.txt" >/dev/null
 grep -q "cannot open material library" "$t/err.txt" && ok "missing MTL warns" || bad "missing MTL: $(cat "$t/err.txt")"
-# Output directory that is a file: error, nothing written.
+# Output directory that is a file: usage error, nothing written.
 touch "$t/afile"
 "$hrad" --quiet -o "$t/afile" "$t/good.obj" 2> "$t/err.txt"
-[ $? = 1 ] && grep -q "not a directory" "$t/err.txt" && ok "output path is a file: clean error" || bad "output path is a file: $(cat "$t/err.txt")"
+[ $? = 2 ] && grep -q "not a directory" "$t/err.txt" && ok "output path is a file: clean error" || bad "output path is a file: $(cat "$t/err.txt")"
 # --help and usage
 "$hrad" --help | grep -q "Usage: hrad" && ok "--help" || bad "--help"
+
+# ---------------------------------------------------------------- the output set
+# A second run into a directory replaces the previous set as a whole (outputs of another scene
+# go), keeps the user's files (the same file, not a copy), and names its set in .hrad-outputs.
+sums() { (cd "$1" && find . -type f | sort | xargs md5sum); }
+"$hrad" --quiet --size 64x48 -o "$t/set" "$t/good.obj" || bad "set: first run failed"
+echo mine > "$t/set/notes.txt"
+ino=$(stat -c %i "$t/set/notes.txt")
+if "$hrad" --quiet --size 64x48 --max-iters 3 -o "$t/set" cornell 2> "$t/err.txt"; then
+  [ ! -e "$t/set/good.png" ] && [ ! -e "$t/set/good.ply" ] && [ -s "$t/set/cornell.png" ] \
+    && ok "set: the previous scene's outputs are replaced as a set" || bad "set: $(ls "$t/set")"
+  [ "$(stat -c %i "$t/set/notes.txt")" = "$ino" ] && [ "$(cat "$t/set/notes.txt")" = mine ] \
+    && ok "set: the user's file is kept" || bad "set: notes.txt lost or changed"
+  grep -qx cornell.glb "$t/set/.hrad-outputs" && ! grep -q notes "$t/set/.hrad-outputs" \
+    && ok "set: .hrad-outputs names the new set only" || bad "set: $(cat "$t/set/.hrad-outputs")"
+else
+  bad "set: second run failed: $(cat "$t/err.txt")"
+fi
+# A scene whose name starts with '.' keeps its outputs (they used to be skipped).
+cp "$t/good.obj" "$t/.h.obj"
+"$hrad" --quiet --size 64x48 -o "$t/dot" "$t/.h.obj" && [ -s "$t/dot/.h.png" ] && [ -s "$t/dot/.h.glb" ] \
+  && ok "scene '.h': its outputs are written" || bad "scene '.h': $(ls -a "$t/dot")"
+# A failed write (a full disk: ulimit -f with SIGXFSZ ignored) is one line, exit 1, and leaves the
+# previous set exactly as it was. stderr goes through a pipe, which the limit does not affect.
+before=$(sums "$t/set")
+for lim in 1 20 600; do # (not 0: LLVM's OpenMP runtime needs a little shared memory)
+  st=$( ( ulimit -f $lim; trap '' XFSZ; "$hrad" --quiet --size 64x48 -o "$t/set" "$t/good.obj" 2>&1 >/dev/null; echo "status $?" ) | cat > "$t/err.txt"; tail -1 "$t/err.txt")
+  msg=$(head -1 "$t/err.txt")
+  if [ "$st" = "status 1" ] && [ "$(wc -l < "$t/err.txt")" = 2 ] && [[ $msg == "hrad: $t/set/"*"File too large" ]] &&
+    [ "$(sums "$t/set")" = "$before" ] && ! ls -a "$t" | grep -q '^\.set\.hrad-'; then
+    ok "full disk ($lim KB): $msg; previous set intact"
+  else
+    bad "full disk ($lim KB): $st: $(cat "$t/err.txt"); $(ls -a "$t" "$t/set")"
+  fi
+done
+# A real full file system (tmpfs), when this user may mount one.
+mnt="$t/mnt"
+mkdir -p "$mnt"
+if mount -t tmpfs -o size=400k tmpfs "$mnt" 2>/dev/null; then
+  "$hrad" --quiet --size 16x16 -o "$mnt/o" "$t/good.obj" 2> "$t/err.txt"
+  st=$?
+  [ "$st" = 1 ] && grep -q "No space left on device" "$t/err.txt" && [ "$(wc -l < "$t/err.txt")" = 1 ] &&
+    [ -z "$(ls -A "$mnt")" ] && ok "full tmpfs: $(cat "$t/err.txt"); nothing left" \
+    || bad "full tmpfs: status $st: $(cat "$t/err.txt"); left: $(ls -A "$mnt")"
+  umount "$mnt"
+else
+  echo "SKIP full tmpfs: cannot mount one here (not root)"
+fi
+
+# ---------------------------------------------------------------- interruptions
+# run_bg DIR ARGS...: starts hrad on museum in the background with SIGINT not ignored (a script's
+# background jobs ignore it otherwise) and waits for its first progress line.
+run_bg() {
+  local out=$1; shift
+  rm -f "$t/bg.txt"
+  ( trap - INT; exec "$hrad" --size 64x48 -o "$out" "$@" museum 2> "$t/bg.txt" ) &
+  pid=$!
+  for _ in $(seq 600); do grep -q '^iter' "$t/bg.txt" 2>/dev/null && break; sleep 0.1; done
+}
+no_staging() { ! ls -a "$t" | grep -q 'hrad-[0-9]'; }
+# SIGINT: stops at the next iteration, one line, status 130, nothing written, no staging left; a
+# previous set stays as it was.
+run_bg "$t/int"
+kill -INT $pid
+wait $pid
+st=$?
+msgs=$(grep -v '^iter' "$t/bg.txt" | grep -v "^hrad: scene '")
+[ "$st" = 130 ] && [ "$msgs" = "hrad: interrupted by SIGINT: stopping without writing outputs (once more to stop at once)" ] &&
+  [ ! -e "$t/int" ] && no_staging && ok "SIGINT: status 130, '$msgs', nothing left" \
+  || bad "SIGINT: status $st, stderr: $msgs; left: $(ls -a "$t")"
+before=$(sums "$t/set")
+run_bg "$t/set" --snapshots
+kill -TERM $pid
+wait $pid
+st=$?
+[ "$st" = 143 ] && grep -q "interrupted by SIGTERM" "$t/bg.txt" && no_staging && [ -s "$t/set/cornell.ply" ] &&
+  [ "$(sums "$t/set" | grep -v iter-)" = "$(echo "$before" | grep -v iter-)" ] \
+  && ok "SIGTERM: status 143, previous set intact (snapshots aside), no staging left" \
+  || bad "SIGTERM: status $st, stderr: $(grep -v '^iter' "$t/bg.txt"); $(ls -a "$t" "$t/set")"
+# A second SIGINT ends the run at once, still without a staging directory.
+run_bg "$t/int2" --bf-low 1e-5
+kill -INT $pid
+sleep 0.2
+kill -INT $pid
+wait $pid
+st=$?
+[ "$st" = 130 ] && [ ! -e "$t/int2" ] && no_staging && ok "second SIGINT: status 130, nothing left" \
+  || bad "second SIGINT: status $st, stderr: $(grep -v '^iter' "$t/bg.txt"); $(ls -a "$t")"
+# SIGKILL leaves the staging directory; the next run into the same DIR removes it.
+run_bg "$t/kill"
+kill -KILL $pid
+wait $pid 2>/dev/null
+ls -a "$t" | grep -q '^\.kill\.hrad-[0-9]' && ok "SIGKILL leaves a staging directory" || bad "SIGKILL: no staging directory?"
+"$hrad" --quiet --size 16x16 --max-iters 2 -o "$t/kill" "$t/good.obj"
+! ls -a "$t" | grep -q '^\.kill\.hrad-' && [ -s "$t/kill/good.png" ] && ok "the next run cleans up after SIGKILL" \
+  || bad "after SIGKILL: $(ls -a "$t")"
+
+# ---------------------------------------------------------------- checkpoints
+# A run stopped by --max-iters, killed (SIGKILL) or interrupted (SIGINT) and resumed, on another
+# thread count, ends with the surfaces.csv of an uninterrupted run, byte for byte.
+ck="--quiet --size 32x24 cornell"
+"$hrad" $ck -o "$t/ckA" --threads 2 || bad "cornell for checkpoints failed"
+"$hrad" $ck -o "$t/ck6" --max-iters 6 --checkpoint "$t/ck6.ckpt" && [ -s "$t/ck6.ckpt" ] \
+  && ok "--max-iters 6 --checkpoint wrote a checkpoint" || bad "--checkpoint after --max-iters 6"
+"$hrad" --size 32x24 cornell -o "$t/ck6r" --threads 1 --resume "$t/ck6.ckpt" --checkpoint "$t/ckD.ckpt" 2> "$t/err.txt"
+cmp -s "$t/ckA/surfaces.csv" "$t/ck6r/surfaces.csv" && grep -q "resumed from .* after iteration 6$" "$t/err.txt" \
+  && ok "resumed after iteration 6 on 1 thread: surfaces.csv identical" \
+  || bad "resume after --max-iters 6: $(head -2 "$t/err.txt")"
+( exec "$hrad" $ck -o "$t/ckK" --checkpoint "$t/ckK.ckpt" --checkpoint-every 0 ) &
+pid=$!
+for _ in $(seq 1000); do [ -e "$t/ckK.ckpt" ] && break; sleep 0.01; done
+kill -KILL $pid 2>/dev/null
+wait $pid 2>/dev/null
+"$hrad" --size 32x24 cornell -o "$t/ckKr" --threads 1 --resume "$t/ckK.ckpt" 2> "$t/err.txt"
+cmp -s "$t/ckA/surfaces.csv" "$t/ckKr/surfaces.csv" \
+  && ok "SIGKILL, then $(grep -o 'resumed .*' "$t/err.txt"): surfaces.csv identical" \
+  || bad "resume after SIGKILL: $(head -2 "$t/err.txt")"
+rm -f "$t/ckI.ckpt"
+( trap - INT; exec "$hrad" --size 32x24 -o "$t/ckI" --checkpoint "$t/ckI.ckpt" --checkpoint-every 1e9 cornell 2> "$t/bg.txt" ) &
+pid=$!
+for _ in $(seq 1000); do grep -q '^iter' "$t/bg.txt" 2>/dev/null && break; sleep 0.01; done
+kill -INT $pid
+wait $pid
+st=$?
+it=$(sed -n 's/^hrad: saved iteration \([0-9]*\) to .*; continue with --resume .*/\1/p' "$t/bg.txt")
+"$hrad" --size 32x24 cornell -o "$t/ckIr" --resume "$t/ckI.ckpt" 2> "$t/err.txt"
+[ "$st" = 130 ] && [ -n "$it" ] && [ ! -e "$t/ckI" ] && cmp -s "$t/ckA/surfaces.csv" "$t/ckIr/surfaces.csv" \
+  && ok "SIGINT saved iteration $it (status 130); resumed: surfaces.csv identical" \
+  || bad "SIGINT with --checkpoint: status $st, iteration '$it': $(cat "$t/bg.txt" | grep -v '^iter')"
+# A finished run's checkpoint: only the outputs, at another size.
+"$hrad" --size 48x36 cornell -o "$t/ckF" --resume "$t/ckD.ckpt" 2> "$t/err.txt"
+cmp -s "$t/ckA/surfaces.csv" "$t/ckF/surfaces.csv" && ! grep -q '^iter' "$t/err.txt" \
+  && ok "resumed from a finished run: no iterations, same surfaces.csv" \
+  || bad "resume of a finished run: $(head -3 "$t/err.txt")"
+# Refusals: other options, another scene, a damaged file, no file.
+"$hrad" $ck -o "$t/ckX" --bf-low 2e-3 --resume "$t/ckK.ckpt" 2> "$t/err.txt"
+st=$?
+[ "$st" = 1 ] && grep -q "^hrad: .*ckK.ckpt: .*other solver options" "$t/err.txt" && [ ! -e "$t/ckX" ] \
+  && ok "resume with other options refused: $(cat "$t/err.txt")" || bad "other options: status $st: $(cat "$t/err.txt")"
+"$hrad" --quiet --size 32x24 room -o "$t/ckX" --resume "$t/ckK.ckpt" 2> "$t/err.txt"
+st=$?
+[ "$st" = 1 ] && grep -q "another scene" "$t/err.txt" && [ ! -e "$t/ckX" ] \
+  && ok "resume for another scene refused" || bad "another scene: status $st: $(cat "$t/err.txt")"
+head -c 5000 "$t/ckK.ckpt" > "$t/cut.ckpt"
+"$hrad" $ck -o "$t/ckX" --resume "$t/cut.ckpt" 2> "$t/err.txt"
+st=$?
+[ "$st" = 1 ] && grep -q "damaged checkpoint" "$t/err.txt" && [ ! -e "$t/ckX" ] \
+  && ok "truncated checkpoint refused: $(cat "$t/err.txt")" || bad "truncated: status $st: $(cat "$t/err.txt")"
+"$hrad" $ck -o "$t/ckX" --resume "$t/none.ckpt" 2> "$t/err.txt"
+st=$?
+[ "$st" = 2 ] && grep -q "^hrad: --resume .*none.ckpt: No such file" "$t/err.txt" \
+  && ok "--resume of a missing file: usage error" || bad "missing --resume file: status $st: $(cat "$t/err.txt")"
 
 # ---------------------------------------------------------------- third-party scenes
 cb="$shared/scenes/cornell/CornellBox-Original.obj"

@@ -1,26 +1,80 @@
-/* hrad: the command line. Parses options, loads or builds the scene, runs the solver with one
- * progress line per iteration, and writes the results into the output directory atomically
- * (everything goes to a temporary directory inside it first and is renamed into place at the end,
- * so a failed run leaves no partial result files). The only part of hrad that prints. */
+/* hrad: the command line, the only part of hrad that prints.
+ *
+ * Order of work: every option is checked first, before anything is read or written; a bad value
+ * is a usage error (one line, exit status 2), with the bounds hr_solver_create checks plus the
+ * command line's own (image size, camera, exposure, --emit values, the output directory). Then
+ * the scene is loaded (bad input: one line naming file and line, exit status 1), solved with one
+ * progress line per iteration, and the outputs are written as one set.
+ *
+ * The output set. Every file goes into a staging directory beside DIR (PARENT/.DIR.hrad-PID,
+ * flock'ed while this run lives, marked by a file .hrad-staging). When all are written, the
+ * staging directory takes DIR's place in one step: rename(2) when DIR does not exist, otherwise
+ * renameat2(RENAME_EXCHANGE), after which the staging name holds the previous DIR and is emptied.
+ * So DIR holds, at every moment, either the complete previous set or the complete new one.
+ * DIR/.hrad-outputs lists the files of the set. Files in DIR that are not on the previous list
+ * (the user's, or outputs of an hrad without the list) are carried into the new DIR by hard
+ * links before the exchange, so they are never missing either; a new output replaces a file of
+ * the same name. DIR must hold only files and symbolic links (checked before the solve), must not
+ * be a mount point, and must not contain the working directory. A staging directory left by a
+ * killed run (SIGKILL, power loss) is cleaned up by the next run into the same DIR. Snapshots
+ * (--snapshots) belong to the set; each is also hard-linked into DIR as soon as it is written.
+ * If renameat2 is not supported (some network file systems), the files are renamed into DIR one
+ * by one, with a warning.
+ *
+ * Signals. SIGINT, SIGTERM and SIGHUP (each unless it was ignored when hrad started, as for
+ * background jobs of scripts and under nohup) are blocked in every thread and taken by one
+ * thread with sigwait. The first one asks the solve to stop at the next safe point (the
+ * per-iteration callback, or between output files) and prints one line; the run then removes its
+ * staging directory and dies by the same signal (exit status 128+N in a shell: 130 for SIGINT,
+ * 143 for SIGTERM). A second one removes the staging directory at once (waiting only for a file
+ * being written) and dies the same way. Once the commit has begun it is completed first. SIGPIPE
+ * is ignored: a closed stderr does not stop a run. */
 #include "hrad.h"
 #include "output.h"
 #include "report.h"
 
+#include <dirent.h>
 #include <errno.h>
+#include <fcntl.h>
+#include <limits.h>
+#include <math.h>
+#include <pthread.h>
+#include <signal.h>
 #include <stdarg.h>
+#include <stdatomic.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <math.h>
+#include <sys/file.h>
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
-#include <dirent.h>
+
+/* Limits the command line enforces on top of hr_solver_create's checks (README "Limits"). */
+#define MIN_SIDE 16                 /* --size: each side in MIN_SIDE..MAX_SIDE */
+#define MAX_SIDE 16384
+#define MAX_PIXELS (1L << 26)       /* --size: W*H; the renderer caps 2x2 supersampling at 2^28 */
+#define MAX_THREADS 1024            /* --threads (0: all cores) */
+#define MIN_EMIT 1e-30              /* --emit: radiosity per channel 0 or in MIN..MAX_EMIT W/m^2 */
+#define MAX_EMIT 1e30               /* (the range of MTL Ke, obj.c) */
+#define MAX_VERIFY 1e12             /* --verify N */
+#define MAX_VERIFY_SPP 1000000      /* --verify-image SPP */
+#define CKPT_EVERY 60.0             /* --checkpoint-every default, seconds */
+
+#define MANIFEST ".hrad-outputs"    /* in DIR: the files of the set, one per line */
+#define MARKER ".hrad-staging"      /* in a staging directory until its commit */
+#define SNAP_TMP ".hrad-snap-"      /* in DIR: a snapshot being linked into place */
+
+typedef struct names {
+  char **v;
+  int n, cap;
+} names;
 
 typedef struct cli {
   hr_options opt;
   const char *scene_arg;
-  const char *outdir;
+  const char *outdir; /* -o as given */
   int quiet;
   int snapshots;
   int hdr;
@@ -31,15 +85,45 @@ typedef struct cli {
   int nemit, cap_emit;
   char **emit_name;
   double (*emit_rgb)[3];
+  const char *ckpt;      /* --checkpoint FILE (NULL: none) */
+  double ckpt_every;     /* --checkpoint-every S: seconds between checkpoints */
+  double ckpt_last;      /* when the last one was written (or the solve began) */
+  int ckpt_iter;         /* the iteration it holds (0: none written) */
+  const char *resume;    /* --resume FILE (NULL: none) */
   int64_t verify_paths; /* --verify N: path-traced reference per polygon (0 = off) */
   int verify_spp;       /* --verify-image SPP: path-traced reference image (0 = off) */
+  int viewer;           /* three.js is installed: write viewer.html */
+  FILE *rep;            /* the --verify reports, shown on stderr once the set is committed (a
+                           failed run prints only its one-line error) */
+  char *rep_buf;
+  size_t rep_len;
+  /* the output set */
+  char disp[PATH_MAX];        /* DIR for messages: -o without trailing slashes */
+  char dir[PATH_MAX];         /* DIR, absolute, symbolic links resolved */
+  char parent[PATH_MAX];      /* its parent directory */
+  char stage[PATH_MAX + 256]; /* the staging directory; "" once committed or removed */
+  int stage_fd;               /* open on the staging directory, holding its flock */
+  names outs;                 /* the files written into the staging directory, in order */
+  int nsnap;
   /* run state */
-  char tmpdir[4096];
-  int outdir_made;
   const hr_scene *scene;
   hr_camera cam;
 } cli;
 
+static cli *g_cli;                /* for cleanup on errors and signals */
+static pthread_mutex_t g_lock;    /* recursive; held while the staging directory changes */
+static atomic_int g_stop;         /* the first signal received, 0 if none */
+static sigset_t g_sigs;           /* the signals the signal thread takes */
+
+static void lock(void) { pthread_mutex_lock(&g_lock); }
+static void unlock(void) { pthread_mutex_unlock(&g_lock); }
+
+/* Prints "hrad: MSG" and the --help hint, exits with status 2 (before anything was written). */
+static void die_usage(const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 1, 2), noreturn))
+#endif
+    ;
 static void die_usage(const char *fmt, ...) {
   va_list ap;
   va_start(ap, fmt);
@@ -50,23 +134,330 @@ static void die_usage(const char *fmt, ...) {
   exit(2);
 }
 
+/* ---------------------------------------------------------------- staging and cleanup */
+
+/* 'a' + '/' + 'b' into out[n]; "" if it does not fit (every use of "" then fails cleanly). */
+static char *join(char *out, size_t n, const char *a, const char *b) {
+  size_t la = strlen(a), lb = strlen(b);
+  if (la + 1 + lb >= n) {
+    out[0] = 0;
+    return out;
+  }
+  memcpy(out, a, la);
+  out[la] = '/';
+  memcpy(out + la + 1, b, lb + 1);
+  return out;
+}
+
+/* Removes every entry of directory 'path' (files only; it holds no directories) and the
+ * directory itself; 1 when it is gone. */
+static int rm_flat(const char *path) {
+  DIR *d = opendir(path);
+  if (d) {
+    int fd = dirfd(d);
+    struct dirent *e;
+    while ((e = readdir(d)))
+      if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..")) unlinkat(fd, e->d_name, 0);
+    closedir(d);
+  }
+  return rmdir(path) == 0 || errno == ENOENT;
+}
+
+/* Removes the staging directory (if any) with everything in it. */
+static void remove_stage(cli *c) {
+  if (!c) return;
+  lock();
+  if (c->stage[0]) rm_flat(c->stage);
+  c->stage[0] = 0;
+  if (c->stage_fd >= 0) close(c->stage_fd);
+  c->stage_fd = -1;
+  unlock();
+}
+
+/* Prints "hrad: MSG" (paths inside the staging directory named by their place in DIR), removes
+ * the staging directory and exits with status 1. */
+static void fail(const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 1, 2), noreturn))
+#endif
+    ;
+static void fail(const char *fmt, ...) {
+  char m[8192], out[8192];
+  va_list ap;
+  va_start(ap, fmt);
+  vsnprintf(m, sizeof m, fmt, ap);
+  va_end(ap);
+  lock();
+  cli *c = g_cli;
+  const char *p = m;
+  size_t k = 0;
+  if (c && c->stage[0]) {
+    size_t sl = strlen(c->stage);
+    for (const char *q; (q = strstr(p, c->stage)) && k < sizeof out;) {
+      k += (size_t)snprintf(out + k, sizeof out - k, "%.*s%s", (int)(q - p), p, c->disp);
+      p = q + sl;
+    }
+  }
+  if (k < sizeof out) snprintf(out + k, sizeof out - k, "%s", p);
+  fprintf(stderr, "hrad: %s\n", out);
+  remove_stage(c);
+  exit(1);
+}
+
+static void check(hr_status st, const hr_err *err) {
+  if (st != HR_OK) fail("%s", err->msg);
+}
+
+static void *xrealloc(void *p, size_t n) {
+  void *q = realloc(p, n ? n : 1);
+  if (!q) fail("out of memory");
+  return q;
+}
+
+static int names_has(const names *l, const char *s) {
+  for (int i = 0; i < l->n; i++)
+    if (!strcmp(l->v[i], s)) return 1;
+  return 0;
+}
+
+static void names_add(names *l, const char *s) {
+  if (names_has(l, s)) return;
+  if (l->n == l->cap) {
+    l->cap = l->cap ? 2 * l->cap : 32;
+    l->v = xrealloc(l->v, (size_t)l->cap * sizeof *l->v);
+  }
+  l->v[l->n] = strdup(s);
+  if (!l->v[l->n]) fail("out of memory");
+  l->n++;
+}
+
+static void names_free(names *l) {
+  for (int i = 0; i < l->n; i++) free(l->v[i]);
+  free(l->v);
+  memset(l, 0, sizeof *l);
+}
+
+/* Reads the list of a set (DIRPATH/.hrad-outputs: '#' comment lines, then one name per line,
+ * with '\' and line breaks escaped as "\\" and "\n", and a leading '#' as "\#") into 'l'; a
+ * missing list is empty. */
+static void read_manifest(const char *dirpath, names *l) {
+  char path[PATH_MAX + 300];
+  join(path, sizeof path, dirpath, MANIFEST);
+  FILE *f = fopen(path, "r");
+  if (!f) return;
+  char *line = NULL;
+  size_t cap = 0;
+  ssize_t n;
+  while ((n = getline(&line, &cap, f)) > 0) {
+    if (line[n - 1] == '\n') line[--n] = 0;
+    if (n == 0 || line[0] == '#') continue;
+    size_t k = 0;
+    for (ssize_t i = 0; i < n; i++) {
+      if (line[i] == '\\' && i + 1 < n) {
+        i++;
+        line[k++] = line[i] == 'n' ? '\n' : line[i];
+      } else {
+        line[k++] = line[i];
+      }
+    }
+    line[k] = 0;
+    if (!strchr(line, '/') && strcmp(line, ".") && strcmp(line, "..")) names_add(l, line);
+  }
+  free(line);
+  fclose(f);
+}
+
+/* Empties 'old', a former DIR (or a staging directory whose marker is gone), and removes it:
+ * files on its list 'set' and hrad's own files are deleted, as are hard links of files that DIR
+ * holds as well (carried over) and files that an output of DIR's set 'now' replaced; anything
+ * else (a file the user added during the exchange) is moved back into DIR unless DIR has that
+ * name, in which case 'old' is kept. 1 when 'old' is gone. */
+static int tidy_old(const char *old, const char *dir, const names *set, const names *now) {
+  DIR *d = opendir(old);
+  if (!d) return errno == ENOENT;
+  int ofd = dirfd(d), keep = 0;
+  struct dirent *e;
+  char p[PATH_MAX + 300];
+  while ((e = readdir(d))) {
+    const char *n = e->d_name;
+    if (!strcmp(n, ".") || !strcmp(n, "..")) continue;
+    if (!strcmp(n, MANIFEST) || !strcmp(n, MARKER) || !strncmp(n, SNAP_TMP, strlen(SNAP_TMP)) ||
+        names_has(set, n)) {
+      unlinkat(ofd, n, 0);
+      continue;
+    }
+    struct stat a, b;
+    if (fstatat(ofd, n, &a, AT_SYMLINK_NOFOLLOW) != 0) continue;
+    join(p, sizeof p, dir, n);
+    if (lstat(p, &b) == 0) {
+      if ((a.st_dev == b.st_dev && a.st_ino == b.st_ino) || names_has(now, n))
+        unlinkat(ofd, n, 0);
+      else
+        keep = 1;
+    } else if (renameat2(ofd, n, AT_FDCWD, p, RENAME_NOREPLACE) != 0) {
+      keep = 1;
+    }
+  }
+  closedir(d);
+  if (keep) return 0;
+  return rmdir(old) == 0 || errno == ENOENT;
+}
+
+/* Cleans up staging directories of DIR left by runs that were killed (no process holds their
+ * flock): one still marked as staging is deleted; one without the marker was swapped or about
+ * to be, and is emptied by tidy_old. */
+static void clean_stale(cli *c, const char *base) {
+  char prefix[300], p[PATH_MAX + 300];
+  snprintf(prefix, sizeof prefix, ".%.200s.hrad-", base);
+  size_t pl = strlen(prefix);
+  DIR *d = opendir(c->parent);
+  if (!d) return;
+  struct dirent *e;
+  names now = {0};
+  read_manifest(c->dir, &now);
+  while ((e = readdir(d))) {
+    const char *n = e->d_name;
+    if (strncmp(n, prefix, pl) || !n[pl] || strspn(n + pl, "0123456789") != strlen(n + pl))
+      continue;
+    if (strtol(n + pl, NULL, 10) == (long)getpid()) continue;
+    join(p, sizeof p, c->parent, n);
+    int fd = open(p, O_RDONLY | O_DIRECTORY | O_NOFOLLOW | O_CLOEXEC);
+    if (fd < 0) continue;
+    if (flock(fd, LOCK_EX | LOCK_NB) == 0) {
+      if (faccessat(fd, MARKER, F_OK, AT_SYMLINK_NOFOLLOW) == 0) {
+        rm_flat(p);
+      } else {
+        names set = {0};
+        read_manifest(p, &set);
+        tidy_old(p, c->dir, &set, &now);
+        names_free(&set);
+      }
+    }
+    close(fd);
+  }
+  names_free(&now);
+  closedir(d);
+}
+
+/* The path of output 'name' in the staging directory, registering it as part of the set. */
+static const char *stage_file(cli *c, const char *name, char *path, size_t n) {
+  names_add(&c->outs, name);
+  if (!*join(path, n, c->stage, name)) fail("%s/%s: path too long", c->disp, name);
+  return path;
+}
+
+/* ---------------------------------------------------------------- signals */
+
+static const char *sig_name(int sig) {
+  return sig == SIGINT    ? "SIGINT"
+         : sig == SIGTERM ? "SIGTERM"
+         : sig == SIGHUP  ? "SIGHUP"
+                          : "a signal";
+}
+
+/* Ends the process by 'sig' with its default action (so a calling shell sees 128+sig and stops a
+ * loop on Ctrl-C); _exit(128+sig) should that not happen. */
+static void die_by_signal(int sig) {
+  fflush(stderr);
+  signal(sig, SIG_DFL);
+  sigset_t one;
+  sigemptyset(&one);
+  sigaddset(&one, sig);
+  raise(sig);
+  pthread_sigmask(SIG_UNBLOCK, &one, NULL);
+  _exit(128 + sig);
+}
+
+/* The signal thread: the first signal asks the run to stop, the second ends it at once. */
+static void *sig_thread(void *arg) {
+  (void)arg;
+  for (int n = 0;; n++) {
+    int sig;
+    if (sigwait(&g_sigs, &sig) != 0) continue;
+    if (n == 0) {
+      atomic_store(&g_stop, sig);
+      fprintf(stderr,
+              "hrad: interrupted by %s: stopping without writing outputs (once more to stop at "
+              "once)\n",
+              sig_name(sig));
+      continue;
+    }
+    lock(); /* not while a file is being written or the set is being committed */
+    remove_stage(g_cli);
+    die_by_signal(sig);
+  }
+  return NULL;
+}
+
+/* Blocks SIGINT, SIGTERM and SIGHUP (those not ignored) in this and every later thread and
+ * starts the thread that takes them; ignores SIGPIPE. */
+static void start_signals(void) {
+  const int sigs[] = {SIGINT, SIGTERM, SIGHUP};
+  sigemptyset(&g_sigs);
+  for (int i = 0; i < 3; i++) {
+    struct sigaction old;
+    if (sigaction(sigs[i], NULL, &old) == 0 && old.sa_handler != SIG_IGN)
+      sigaddset(&g_sigs, sigs[i]);
+  }
+  signal(SIGPIPE, SIG_IGN);
+  pthread_sigmask(SIG_BLOCK, &g_sigs, NULL);
+  pthread_t th;
+  pthread_attr_t at;
+  pthread_attr_init(&at);
+  pthread_attr_setdetachstate(&at, PTHREAD_CREATE_DETACHED);
+  pthread_attr_setstacksize(&at, 1 << 18);
+  if (pthread_create(&th, &at, sig_thread, NULL) != 0)
+    pthread_sigmask(SIG_UNBLOCK, &g_sigs, NULL); /* no thread: the default actions apply */
+  pthread_attr_destroy(&at);
+}
+
+/* A safe point: after a signal, removes the staging directory and ends the run. */
+static void check_stop(cli *c) {
+  int sig = atomic_load(&g_stop);
+  if (!sig) return;
+  lock();
+  remove_stage(c);
+  die_by_signal(sig);
+}
+
+/* ---------------------------------------------------------------- options */
+
 static void usage(void) {
   hr_options d;
   hr_options_default(&d);
+  char scenes[256] = "";
+  for (const char *const *n = hr_scene_builtin_names(); *n; n++)
+    snprintf(scenes + strlen(scenes), sizeof scenes - strlen(scenes), "%s%s",
+             scenes[0] ? ", " : "", *n);
   printf(
-      "Usage: hrad [OPTIONS] [SCENE]\n"
-      "Hierarchical radiosity (Bohn & Garmann, WSCG'95). SCENE is a built-in name (room, floor,\n"
-      "museum, cornell; default room) or a path to a Wavefront .obj file with its .mtl.\n"
+      "Usage: hrad [OPTIONS] [--] [SCENE]\n"
+      "Hierarchical radiosity (Bohn & Garmann, WSCG'95). SCENE is a built-in name\n"
+      "(%s; default room) or a path to a Wavefront .obj file\n"
+      "with its .mtl.\n"
       "\n"
-      "Output (written atomically into DIR):\n"
+      "Output (written as one set: DIR holds the complete previous or the complete new set):\n"
       "  -o, --out DIR        output directory (default hrad-out): surfaces.csv, stats.json,\n"
-      "                       SCENE.png, SCENE-elements.png, SCENE.ply, SCENE.glb, viewer.html\n"
-      "  --size WxH           image size (default 800x600)\n"
-      "  --camera E:A[:FOV]   camera eye and look-at point, 'ex,ey,ez:ax,ay,az[:fov]' (degrees)\n"
-      "  --exposure X         linear exposure factor (default: automatic)\n"
+      "                       SCENE.png, SCENE-elements.png, SCENE.ply, SCENE.glb, viewer.html;\n"
+      "                       other files in DIR are kept, subdirectories are refused\n"
+      "  --size WxH           image size (default 800x600): each side %d..%d, at most\n"
+      "                       %ld pixels\n"
+      "  --camera E:A[:FOV]   camera eye and look-at point, 'ex,ey,ez:ax,ay,az[:fov]' (degrees,\n"
+      "                       1 < fov < 179, default 50)\n"
+      "  --exposure X         linear exposure factor > 0 (default: automatic)\n"
       "  --hdr                also write SCENE.pfm (linear radiosity image)\n"
       "  --snapshots          write DIR/iter-NN.png after every iteration while solving\n"
-      "  --quiet              no progress lines or timing table\n"
+      "  --quiet              no progress lines, warnings or timing table\n"
+      "\n"
+      "Checkpoints (README 'Long runs'):\n"
+      "  --checkpoint FILE    save the solver's state to FILE (atomically: a kill leaves the\n"
+      "                       previous one whole) after an iteration when --checkpoint-every\n"
+      "                       seconds have passed since the last, when a signal stops the run,\n"
+      "                       and at the end\n"
+      "  --checkpoint-every S seconds between checkpoints (>= 0, default %g; 0: every iteration)\n"
+      "  --resume FILE        continue from a checkpoint of the same scene and solver options\n"
+      "                       (--threads may differ); the result is the one an uninterrupted\n"
+      "                       run gives, bit for bit. From a finished run's checkpoint only the\n"
+      "                       outputs are written (e.g. other --camera or --size)\n"
       "\n"
       "Checking (an independent Monte Carlo path tracer, README 'Checking the light'):\n"
       "  --verify N           after solving, estimate every polygon with N paths, print a\n"
@@ -76,52 +467,74 @@ static void usage(void) {
       "                       DIR/SCENE-reference.png and print the mean per-pixel error\n"
       "\n"
       "Scene:\n"
-      "  --emit NAME=R,G,B    make material NAME emit radiosity R,G,B (W/m^2); repeatable\n"
+      "  --emit NAME=R,G,B    make material NAME emit radiosity R,G,B (W/m^2: 0 or %g..%g);\n"
+      "                       repeatable\n"
       "\n"
       "Solver (thresholds are dimensionless: errors relative to the light each element\n"
       "receives, B relative to the scene's mean radiosity, areas relative to the total area,\n"
       "so they suit scenes in any unit and any brightness):\n"
       "  --bf-low X           accuracy: the largest error a link may bring its receiver,\n"
       "                       relative to the receiver's light; the main quality setting\n"
-      "                       (default %g; smaller is more accurate and slower)\n"
-      "  --bf-start X         first BF_e of the multigrid schedule (default %g)\n"
-      "  --bf-factor X        BF_e is divided by X per level (default %g)\n"
+      "                       (> 0, default %g; smaller is more accurate and slower)\n"
+      "  --bf-start X         first BF_e of the multigrid schedule (>= BF_low, default %g)\n"
+      "  --bf-factor X        BF_e is divided by X per level (> 1, default %g)\n"
       "  --area-min X         minimum element area A_e, relative to the total area\n"
-      "                       (default: equal to BF_low)\n"
-      "  --b-eps X            convergence: max change of B below X (default %g)\n"
-      "  --b-max X            B_max of the relaxed inner loop (default %g)\n"
+      "                       (0 <= X < 1, default 0: equal to BF_low)\n"
+      "  --b-eps X            convergence: max change of B below X (> 0, default %g)\n"
+      "  --b-max X            B_max of the relaxed inner loop (>= B_eps, default %g)\n"
       "  --no-relax           rigid inner loop (paper Figure 3) instead of section 2.2.4\n"
-      "  --rays K             rays per link for the visible fraction H (default %d)\n"
-      "  --seed N             jitter seed (default %llu)\n"
-      "  --threads N          worker threads (default: all cores)\n"
-      "  --max-iters N        stop after N iterations (default %d)\n"
-      "  --max-pairs N        refuse scenes with more surface pairs than N (default %g)\n"
-      "  -h, --help           this help\n",
-      d.bf_low, d.bf_start, d.bf_factor, d.b_eps, d.b_max, d.rays, (unsigned long long)d.seed,
-      d.max_iters, d.max_links);
+      "  --rays K             rays per link for the visible fraction H (1..4096, default %d)\n"
+      "  --seed N             jitter seed (0..2^64-1, default %llu)\n"
+      "  --threads N          worker threads (0..%d, default 0: all cores)\n"
+      "  --max-iters N        stop after N iterations (1..%d, default %d)\n"
+      "  --max-pairs N        refuse scenes with more surface pairs than N (0: no limit,\n"
+      "                       default %g)\n"
+      "  -h, --help           this help\n"
+      "\n"
+      "Exit status: 0 done, 1 bad input or a failure (nothing written), 2 usage error;\n"
+      "interrupted by a signal: 128+N (Ctrl-C: 130; a second Ctrl-C stops at once).\n",
+      scenes, MIN_SIDE, MAX_SIDE, MAX_PIXELS, CKPT_EVERY, MIN_EMIT, MAX_EMIT, d.bf_low, d.bf_start, d.bf_factor,
+      d.b_eps, d.b_max, d.rays, (unsigned long long)d.seed, MAX_THREADS, INT_MAX, d.max_iters,
+      d.max_links);
 }
 
-static double parse_num(const char *opt, const char *v) {
+/* A real option value: a finite number and nothing else. */
+static double parse_real(const char *opt, const char *v) {
+  char *end;
+  double x = strtod(v, &end);
+  if (end == v || *end) die_usage("%s: not a number: '%s'", opt, v);
+  if (!isfinite(x)) die_usage("%s: not a finite number: '%s'", opt, v);
+  return x;
+}
+
+/* A whole-number option value in [lo, hi]: the range is checked on the double, before any cast
+ * (so 1e300, inf and NaN are errors, not undefined behaviour). */
+static double parse_whole(const char *opt, const char *v, double lo, double hi) {
+  char *end;
+  double x = strtod(v, &end);
+  if (end == v || *end) die_usage("%s: not a number: '%s'", opt, v);
+  if (!(x >= lo && x <= hi && x == floor(x)))
+    die_usage("%s must be a whole number in %.0f..%.0f, got '%s'", opt, lo, hi, v);
+  return x;
+}
+
+/* --seed: decimal digits only (all 2^64 seeds are reachable, none is rounded). */
+static uint64_t parse_seed(const char *v) {
   char *end;
   errno = 0;
-  double x = strtod(v, &end);
-  if (errno || end == v || *end || x != x) die_usage("%s: not a number: '%s'", opt, v);
-  return x;
+  unsigned long long x = strtoull(v, &end, 10);
+  if (!*v || strspn(v, "0123456789") != strlen(v) || errno == ERANGE)
+    die_usage("--seed must be a whole number in 0..%llu, got '%s'", (unsigned long long)UINT64_MAX,
+              v);
+  return (uint64_t)x;
 }
 
-/* An integer option value in [1, max]; anything else is a usage error. */
-static double parse_count(const char *opt, const char *v, double max) {
-  double x = parse_num(opt, v);
-  if (!(x >= 1 && x <= max && x == floor(x)))
-    die_usage("%s: expected a whole number from 1 to %g, got '%s'", opt, max, v);
-  return x;
-}
-
+/* 'n' comma-separated numbers at 's', followed by the end or ':'. */
 static int parse_vec(const char *s, double *out, int n) {
   for (int i = 0; i < n; i++) {
     char *end;
     out[i] = strtod(s, &end);
-    if (end == s || !(out[i] == out[i])) return 0;
+    if (end == s) return 0;
     s = end;
     if (i + 1 < n) {
       if (*s != ',') return 0;
@@ -136,13 +549,25 @@ static void parse_camera(cli *c, const char *v) {
   const char *colon = strchr(v, ':');
   if (!colon || !parse_vec(v, e, 3) || !parse_vec(colon + 1, a, 3))
     die_usage("--camera: expected 'ex,ey,ez:ax,ay,az[:fov]', got '%s'", v);
+  for (int k = 0; k < 3; k++)
+    if (!isfinite(e[k]) || !isfinite(a[k]))
+      die_usage("--camera: the coordinates must be finite numbers, got '%s'", v);
+  double d[3] = {a[0] - e[0], a[1] - e[1], a[2] - e[2]};
+  double len = sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+  if (!isfinite(len)) die_usage("--camera: coordinates too large in '%s'", v);
+  if (!(len > 0)) die_usage("--camera: the eye and the look-at point coincide in '%s'", v);
   c->camera.eye = (hr_vec3){e[0], e[1], e[2]};
   c->camera.at = (hr_vec3){a[0], a[1], a[2]};
   c->camera.up = (hr_vec3){0, 1, 0};
   c->camera.fov_deg = 50;
   const char *c2 = strchr(colon + 1, ':');
-  if (c2) c->camera.fov_deg = parse_num("--camera fov", c2 + 1);
-  if (!(c->camera.fov_deg > 1 && c->camera.fov_deg < 179)) die_usage("--camera: fov out of range");
+  if (c2) {
+    char *end;
+    c->camera.fov_deg = strtod(c2 + 1, &end);
+    if (end == c2 + 1 || *end) die_usage("--camera: fov is not a number in '%s'", v);
+  }
+  if (!(c->camera.fov_deg > 1 && c->camera.fov_deg < 179))
+    die_usage("--camera: fov must be in (1, 179) degrees, got '%s'", v);
   c->have_camera = 1;
 }
 
@@ -152,7 +577,8 @@ static void parse_emit(cli *c, const char *v) {
   if (!eq || eq == v || !parse_vec(eq + 1, rgb, 3) || strchr(eq + 1, ':'))
     die_usage("--emit: expected NAME=R,G,B, got '%s'", v);
   for (int k = 0; k < 3; k++)
-    if (rgb[k] < 0) die_usage("--emit: negative radiosity in '%s'", v);
+    if (rgb[k] != 0 && !(rgb[k] >= MIN_EMIT && rgb[k] <= MAX_EMIT))
+      die_usage("--emit: radiosity must be 0 or in [%g, %g], got '%s'", MIN_EMIT, MAX_EMIT, v);
   if (c->nemit == c->cap_emit) {
     c->cap_emit = c->cap_emit ? 2 * c->cap_emit : 8;
     c->emit_name = realloc(c->emit_name, (size_t)c->cap_emit * sizeof *c->emit_name);
@@ -160,55 +586,157 @@ static void parse_emit(cli *c, const char *v) {
     if (!c->emit_name || !c->emit_rgb) die_usage("out of memory");
   }
   c->emit_name[c->nemit] = strndup(v, (size_t)(eq - v));
+  if (!c->emit_name[c->nemit]) die_usage("out of memory");
   memcpy(c->emit_rgb[c->nemit], rgb, sizeof rgb);
   c->nemit++;
 }
 
+/* One side of --size: the decimal digits between 'a' and 'b' (-1 if there are none or anything
+ * else; LONG_MAX if too many). */
+static long parse_side(const char *a, const char *b) {
+  if (b <= a) return -1;
+  for (const char *p = a; p < b; p++)
+    if (*p < '0' || *p > '9') return -1;
+  if (b - a > 9) return LONG_MAX;
+  long x = 0;
+  for (const char *p = a; p < b; p++) x = 10 * x + (*p - '0');
+  return x;
+}
+
+static void parse_size(cli *c, const char *v) {
+  const char *x = strchr(v, 'x');
+  long w = x ? parse_side(v, x) : -1, h = x ? parse_side(x + 1, x + 1 + strlen(x + 1)) : -1;
+  if (w < 0 || h < 0) die_usage("--size: expected WxH (e.g. 800x600), got '%s'", v);
+  if (w < MIN_SIDE || h < MIN_SIDE || w > MAX_SIDE || h > MAX_SIDE)
+    die_usage("--size: each side must be in %d..%d, got '%s'", MIN_SIDE, MAX_SIDE, v);
+  if (w * h > MAX_PIXELS)
+    die_usage("--size: at most %ld pixels (e.g. 8192x8192), got '%s'", MAX_PIXELS, v);
+  c->w = (int)w;
+  c->h = (int)h;
+}
+
+/* --checkpoint FILE must be creatable (its directory exists and is writable, FILE is not a
+ * directory); --resume FILE must be a readable file. */
+static void check_ckpt_paths(const cli *c) {
+  struct stat st;
+  if (c->resume) {
+    if (stat(c->resume, &st) != 0) die_usage("--resume %s: %s", c->resume, strerror(errno));
+    if (!S_ISREG(st.st_mode)) die_usage("--resume %s: not a file", c->resume);
+    if (access(c->resume, R_OK) != 0) die_usage("--resume %s: %s", c->resume, strerror(errno));
+  }
+  if (c->ckpt) {
+    if (stat(c->ckpt, &st) == 0 && S_ISDIR(st.st_mode))
+      die_usage("--checkpoint %s: is a directory", c->ckpt);
+    char dir[PATH_MAX];
+    const char *slash = strrchr(c->ckpt, '/');
+    if (!slash)
+      strcpy(dir, ".");
+    else if (slash == c->ckpt)
+      strcpy(dir, "/");
+    else
+      snprintf(dir, sizeof dir, "%.*s", (int)(slash - c->ckpt), c->ckpt);
+    if (stat(dir, &st) != 0 || !S_ISDIR(st.st_mode))
+      die_usage("--checkpoint %s: no directory %s", c->ckpt, dir);
+    if (access(dir, W_OK) != 0)
+      die_usage("--checkpoint %s: cannot write in %s: %s", c->ckpt, dir, strerror(errno));
+  }
+}
+
 static void parse_args(cli *c, int argc, char **argv) {
   hr_options_default(&c->opt);
+  hr_options *o = &c->opt;
   c->outdir = "hrad-out";
   c->w = 800;
   c->h = 600;
+  c->ckpt_every = CKPT_EVERY;
+  int opts_done = 0;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
 #define NEXT() (i + 1 < argc ? argv[++i] : (die_usage("%s needs a value", a), ""))
-    if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
+    if (opts_done || a[0] != '-' || a[1] == 0) {
+      if (c->scene_arg) die_usage("more than one scene given ('%s' and '%s')", c->scene_arg, a);
+      if (!*a) die_usage("empty scene name");
+      c->scene_arg = a;
+    } else if (!strcmp(a, "--")) {
+      opts_done = 1;
+    } else if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
       usage();
       exit(0);
-    } else if (!strcmp(a, "-o") || !strcmp(a, "--out")) c->outdir = NEXT();
-    else if (!strcmp(a, "--quiet")) c->quiet = 1;
+    } else if (!strcmp(a, "-o") || !strcmp(a, "--out")) {
+      c->outdir = NEXT();
+      if (!*c->outdir) die_usage("%s: empty directory name", a);
+    } else if (!strcmp(a, "--quiet")) c->quiet = 1;
     else if (!strcmp(a, "--snapshots")) c->snapshots = 1;
     else if (!strcmp(a, "--hdr")) c->hdr = 1;
-    else if (!strcmp(a, "--no-relax")) c->opt.relax = 0;
-    else if (!strcmp(a, "--bf-low")) c->opt.bf_low = parse_num(a, NEXT());
-    else if (!strcmp(a, "--bf-start")) c->opt.bf_start = parse_num(a, NEXT());
-    else if (!strcmp(a, "--bf-factor")) c->opt.bf_factor = parse_num(a, NEXT());
-    else if (!strcmp(a, "--area-min")) c->opt.area_min = parse_num(a, NEXT());
-    else if (!strcmp(a, "--b-eps")) c->opt.b_eps = parse_num(a, NEXT());
-    else if (!strcmp(a, "--b-max")) c->opt.b_max = parse_num(a, NEXT());
-    else if (!strcmp(a, "--rays")) c->opt.rays = (int)parse_num(a, NEXT());
-    else if (!strcmp(a, "--seed")) c->opt.seed = (uint64_t)parse_num(a, NEXT());
-    else if (!strcmp(a, "--threads")) c->opt.threads = (int)parse_num(a, NEXT());
-    else if (!strcmp(a, "--max-iters")) c->opt.max_iters = (int)parse_num(a, NEXT());
-    else if (!strcmp(a, "--max-pairs")) c->opt.max_links = parse_num(a, NEXT());
-    else if (!strcmp(a, "--verify")) c->verify_paths = (int64_t)parse_count(a, NEXT(), 1e12);
-    else if (!strcmp(a, "--verify-image")) c->verify_spp = (int)parse_count(a, NEXT(), 1e6);
-    else if (!strcmp(a, "--exposure")) {
-      c->exposure = parse_num(a, NEXT());
-      if (!(c->exposure > 0)) die_usage("--exposure must be > 0");
+    else if (!strcmp(a, "--no-relax")) o->relax = 0;
+    else if (!strcmp(a, "--bf-low")) {
+      const char *v = NEXT();
+      if (!((o->bf_low = parse_real(a, v)) > 0)) die_usage("--bf-low must be > 0, got '%s'", v);
+    } else if (!strcmp(a, "--bf-start")) {
+      const char *v = NEXT();
+      if (!((o->bf_start = parse_real(a, v)) > 0)) die_usage("--bf-start must be > 0, got '%s'", v);
+    } else if (!strcmp(a, "--bf-factor")) {
+      const char *v = NEXT();
+      if (!((o->bf_factor = parse_real(a, v)) > 1))
+        die_usage("--bf-factor must be > 1, got '%s'", v);
+    } else if (!strcmp(a, "--area-min")) {
+      const char *v = NEXT();
+      o->area_min = parse_real(a, v);
+      if (!(o->area_min >= 0 && o->area_min < 1))
+        die_usage("--area-min must be in [0, 1) (0: BF_low), got '%s'", v);
+    } else if (!strcmp(a, "--b-eps")) {
+      const char *v = NEXT();
+      if (!((o->b_eps = parse_real(a, v)) > 0)) die_usage("--b-eps must be > 0, got '%s'", v);
+    } else if (!strcmp(a, "--b-max")) {
+      const char *v = NEXT();
+      if (!((o->b_max = parse_real(a, v)) > 0)) die_usage("--b-max must be > 0, got '%s'", v);
+    } else if (!strcmp(a, "--max-pairs")) {
+      const char *v = NEXT();
+      if (!((o->max_links = parse_real(a, v)) >= 0))
+        die_usage("--max-pairs must be >= 0 (0: no limit), got '%s'", v);
+    } else if (!strcmp(a, "--exposure")) {
+      const char *v = NEXT();
+      if (!((c->exposure = parse_real(a, v)) > 0)) die_usage("--exposure must be > 0, got '%s'", v);
+    } else if (!strcmp(a, "--rays")) o->rays = (int)parse_whole(a, NEXT(), 1, 4096);
+    else if (!strcmp(a, "--seed")) o->seed = parse_seed(NEXT());
+    else if (!strcmp(a, "--threads")) o->threads = (int)parse_whole(a, NEXT(), 0, MAX_THREADS);
+    else if (!strcmp(a, "--max-iters")) o->max_iters = (int)parse_whole(a, NEXT(), 1, INT_MAX);
+    else if (!strcmp(a, "--verify"))
+      c->verify_paths = (int64_t)parse_whole(a, NEXT(), 1, MAX_VERIFY);
+    else if (!strcmp(a, "--verify-image"))
+      c->verify_spp = (int)parse_whole(a, NEXT(), 1, MAX_VERIFY_SPP);
+    else if (!strcmp(a, "--checkpoint")) {
+      c->ckpt = NEXT();
+      if (!*c->ckpt) die_usage("--checkpoint: empty file name");
+    } else if (!strcmp(a, "--checkpoint-every")) {
+      const char *v = NEXT();
+      if (!((c->ckpt_every = parse_real(a, v)) >= 0))
+        die_usage("--checkpoint-every must be >= 0 seconds, got '%s'", v);
+    } else if (!strcmp(a, "--resume")) {
+      c->resume = NEXT();
+      if (!*c->resume) die_usage("--resume: empty file name");
     } else if (!strcmp(a, "--camera")) parse_camera(c, NEXT());
     else if (!strcmp(a, "--emit")) parse_emit(c, NEXT());
-    else if (!strcmp(a, "--size")) {
-      const char *v = NEXT();
-      if (sscanf(v, "%dx%d", &c->w, &c->h) != 2 || c->w < 16 || c->h < 16 || c->w > 16384 ||
-          c->h > 16384)
-        die_usage("--size: expected WxH between 16 and 16384, got '%s'", v);
-    } else if (a[0] == '-' && a[1] != 0) die_usage("unknown option '%s'", a);
-    else if (c->scene_arg) die_usage("more than one scene given ('%s' and '%s')", c->scene_arg, a);
-    else c->scene_arg = a;
+    else if (!strcmp(a, "--size")) parse_size(c, NEXT());
+    else die_usage("unknown option '%s'", a);
 #undef NEXT
   }
   if (!c->scene_arg) c->scene_arg = "room";
+  check_ckpt_paths(c);
+  /* the checks of hr_solver_create that relate two options, with its messages */
+  if (!(o->bf_start >= o->bf_low))
+    die_usage("--bf-start must be >= --bf-low (%g < %g)", o->bf_start, o->bf_low);
+  if (!(o->b_max >= o->b_eps))
+    die_usage("--b-max must be >= --b-eps (%g < %g)", o->b_max, o->b_eps);
+  /* the images must fit in memory: the renderer's 2x2 samples (depth, colour, leaf index: 80
+   * bytes a pixel), the float image and the PNG rows; --verify-image adds two float images */
+  double need = (double)c->w * c->h * (95.0 + (c->verify_spp ? 24.0 : 0.0));
+  long pages = sysconf(_SC_PHYS_PAGES), psize = sysconf(_SC_PAGESIZE);
+  double mem = pages > 0 && psize > 0 ? (double)pages * (double)psize : 0;
+  if (mem > 0 && need > 0.8 * mem)
+    die_usage("--size %dx%d: the images need about %.1f GB, more than this machine's %.1f GB of "
+              "memory allows",
+              c->w, c->h, need / 1e9, mem / 1e9);
 }
 
 static void warn_cb(void *ud, const char *msg) {
@@ -216,59 +744,276 @@ static void warn_cb(void *ud, const char *msg) {
   fprintf(stderr, "hrad: warning: %s\n", msg);
 }
 
-/* ---------------------------------------------------------------- output files */
+/* ---------------------------------------------------------------- the output directory */
 
-static void rm_tree_flat(const char *dir) {
-  DIR *d = opendir(dir);
-  if (!d) return;
+/* Whether the three.js files hr_viewer_write embeds are installed. */
+static int three_available(void) {
+  static const char *const need[] = {"examples/jsm/controls/OrbitControls.js",
+                                     "examples/jsm/loaders/GLTFLoader.js",
+                                     "examples/jsm/utils/BufferGeometryUtils.js"};
+  const char *d = hr_viewer_three_dir();
+  char p[PATH_MAX + 100];
+  snprintf(p, sizeof p, "%s/build/three.module.min.js", d);
+  int ok = access(p, R_OK) == 0;
+  snprintf(p, sizeof p, "%s/build/three.module.js", d);
+  ok = ok || access(p, R_OK) == 0;
+  for (int i = 0; i < 3 && ok; i++) {
+    join(p, sizeof p, d, need[i]);
+    ok = access(p, R_OK) == 0;
+  }
+  return ok;
+}
+
+/* Checks -o before any work (every problem is a usage error), cleans up what killed runs left,
+ * and creates this run's staging directory beside DIR. */
+static void prepare_outdir(cli *c) {
+  const char *o = c->outdir;
+  size_t n = strlen(o);
+  if (n >= sizeof c->disp) die_usage("-o: directory name too long");
+  memcpy(c->disp, o, n + 1);
+  while (n > 1 && c->disp[n - 1] == '/') c->disp[--n] = 0;
+  struct stat st, ps;
+  int exists = stat(c->disp, &st) == 0;
+  if (exists) {
+    if (!S_ISDIR(st.st_mode)) die_usage("-o %s: exists and is not a directory", o);
+    if (!realpath(c->disp, c->dir)) die_usage("-o %s: %s", o, strerror(errno));
+  } else {
+    if (errno != ENOENT) die_usage("-o %s: %s", o, strerror(errno));
+    if (lstat(c->disp, &st) == 0) die_usage("-o %s: a symbolic link to nothing", o);
+    char par[PATH_MAX], rp[PATH_MAX];
+    const char *slash = strrchr(c->disp, '/');
+    const char *base = slash ? slash + 1 : c->disp;
+    if (!slash)
+      strcpy(par, ".");
+    else if (slash == c->disp)
+      strcpy(par, "/");
+    else
+      snprintf(par, sizeof par, "%.*s", (int)(slash - c->disp), c->disp);
+    if (!realpath(par, rp)) die_usage("-o %s: %s: %s", o, par, strerror(errno));
+    if (stat(rp, &ps) != 0 || !S_ISDIR(ps.st_mode))
+      die_usage("-o %s: %s is not a directory", o, par);
+    if (strlen(rp) + strlen(base) + 2 > sizeof c->dir) die_usage("-o %s: path too long", o);
+    join(c->dir, sizeof c->dir, strcmp(rp, "/") ? rp : "", base);
+  }
+  if (!strcmp(c->dir, "/"))
+    die_usage("-o %s: hrad replaces its output directory as a whole; give one of its own", o);
+  char *ls = strrchr(c->dir, '/');
+  const char *base = ls + 1;
+  if (ls == c->dir)
+    strcpy(c->parent, "/");
+  else
+    snprintf(c->parent, sizeof c->parent, "%.*s", (int)(ls - c->dir), c->dir);
+  if (exists) {
+    if (stat(c->parent, &ps) != 0 || ps.st_dev != st.st_dev)
+      die_usage("-o %s: a mount point; hrad replaces its output directory as a whole, so give "
+                "a directory inside it",
+                o);
+    char cwd[PATH_MAX];
+    size_t dl = strlen(c->dir);
+    if (getcwd(cwd, sizeof cwd) && !strncmp(cwd, c->dir, dl) && (cwd[dl] == 0 || cwd[dl] == '/'))
+      die_usage("-o %s: holds the working directory; hrad replaces its output directory as a "
+                "whole, so give one of its own",
+                o);
+    DIR *d = opendir(c->dir);
+    if (!d) die_usage("-o %s: cannot read: %s", o, strerror(errno));
+    struct dirent *e;
+    while ((e = readdir(d))) {
+      struct stat es;
+      if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
+      if (fstatat(dirfd(d), e->d_name, &es, AT_SYMLINK_NOFOLLOW) == 0 && !S_ISREG(es.st_mode) &&
+          !S_ISLNK(es.st_mode)) {
+        char nm[256];
+        snprintf(nm, sizeof nm, "%s", e->d_name);
+        closedir(d);
+        die_usage("-o %s: holds '%s', which is not a file; hrad replaces its output directory "
+                  "as a whole, so give one of its own",
+                  o, nm);
+      }
+    }
+    closedir(d);
+    if (c->snapshots && access(c->dir, W_OK) != 0)
+      die_usage("-o %s: not writable (--snapshots): %s", o, strerror(errno));
+  }
+  clean_stale(c, base);
+  snprintf(c->stage, sizeof c->stage, "%s/.%.200s.hrad-%ld", c->parent, base, (long)getpid());
+  lock();
+  if (mkdir(c->stage, 0777) != 0) {
+    int e = errno;
+    c->stage[0] = 0;
+    die_usage("-o %s: cannot write in %s: %s", o, c->parent, strerror(e));
+  }
+  c->stage_fd = open(c->stage, O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  char mk[sizeof c->stage + 32];
+  join(mk, sizeof mk, c->stage, MARKER);
+  int fd = c->stage_fd >= 0 && flock(c->stage_fd, LOCK_EX | LOCK_NB) == 0
+               ? open(mk, O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0666)
+               : -1;
+  if (fd < 0) {
+    int e = errno;
+    remove_stage(c);
+    die_usage("-o %s: cannot write in %s: %s", o, c->parent, strerror(e));
+  }
+  close(fd);
+  unlock();
+}
+
+/* Before the exchange: hard-links every file of DIR that is not an output of the previous set
+ * ('old') nor replaced by one of the new set into the staging directory, so that it stays in
+ * DIR throughout. */
+static void carry_over(cli *c, const names *old) {
+  DIR *d = opendir(c->dir);
+  if (!d) fail("%s: cannot read: %s", c->disp, strerror(errno));
   struct dirent *e;
-  char p[8192];
   while ((e = readdir(d))) {
-    if (!strcmp(e->d_name, ".") || !strcmp(e->d_name, "..")) continue;
-    snprintf(p, sizeof p, "%s/%s", dir, e->d_name);
-    unlink(p);
+    const char *n = e->d_name;
+    if (!strcmp(n, ".") || !strcmp(n, "..") || !strcmp(n, MANIFEST) || !strcmp(n, MARKER) ||
+        !strncmp(n, SNAP_TMP, strlen(SNAP_TMP)) || names_has(old, n) || names_has(&c->outs, n))
+      continue;
+    struct stat st;
+    if (fstatat(dirfd(d), n, &st, AT_SYMLINK_NOFOLLOW) != 0) continue; /* gone meanwhile */
+    char nm[256];
+    snprintf(nm, sizeof nm, "%s", n);
+    if (!S_ISREG(st.st_mode) && !S_ISLNK(st.st_mode)) {
+      closedir(d);
+      fail("%s: holds '%s', which is not a file; nothing written (hrad replaces its output "
+           "directory as a whole)",
+           c->disp, nm);
+    }
+    if (linkat(dirfd(d), n, c->stage_fd, n, 0) != 0) {
+      int er = errno;
+      closedir(d);
+      fail("%s/%s: cannot keep this file through the exchange (hard link: %s); nothing written",
+           c->disp, nm, strerror(er));
+    }
   }
   closedir(d);
-  rmdir(dir);
 }
 
-static cli *g_cli; /* for cleanup on error */
-
-static void fail(const char *msg) {
-  fprintf(stderr, "hrad: %s\n", msg);
-  if (g_cli && g_cli->tmpdir[0]) rm_tree_flat(g_cli->tmpdir);
-  exit(1);
+/* Removes what carry_over linked into the staging directory. */
+static void drop_carried(cli *c) {
+  DIR *d = opendir(c->stage);
+  if (!d) return;
+  struct dirent *e;
+  while ((e = readdir(d)))
+    if (strcmp(e->d_name, ".") && strcmp(e->d_name, "..") && strcmp(e->d_name, MANIFEST) &&
+        strcmp(e->d_name, MARKER) && !names_has(&c->outs, e->d_name))
+      unlinkat(dirfd(d), e->d_name, 0);
+  closedir(d);
 }
 
-static void ensure_outdir(cli *c) {
-  if (c->outdir_made) return;
-  if (mkdir(c->outdir, 0777) != 0 && errno != EEXIST) {
-    char m[4200];
-    snprintf(m, sizeof m, "%s: cannot create directory: %s", c->outdir, strerror(errno));
-    fail(m);
+/* The list of the new set, DIR/.hrad-outputs. */
+static void write_manifest(cli *c) {
+  char path[sizeof c->stage + 32];
+  join(path, sizeof path, c->stage, MANIFEST);
+  FILE *f = fopen(path, "w");
+  if (!f) fail("%s: cannot write: %s", path, strerror(errno));
+  fprintf(f, "# hrad: the files of the output set in this directory. The next hrad run into it\n"
+             "# replaces them as a set; other files are kept.\n");
+  for (int i = 0; i < c->outs.n; i++) {
+    if (c->outs.v[i][0] == '#') fputc('\\', f); /* not a comment */
+    for (const char *p = c->outs.v[i]; *p; p++) {
+      if (*p == '\\' || *p == '\n') fputc('\\', f);
+      fputc(*p == '\n' ? 'n' : *p, f);
+    }
+    fputc('\n', f);
   }
-  struct stat st;
-  if (stat(c->outdir, &st) != 0 || !S_ISDIR(st.st_mode)) {
-    char m[4200];
-    snprintf(m, sizeof m, "%s: not a directory", c->outdir);
-    fail(m);
-  }
-  snprintf(c->tmpdir, sizeof c->tmpdir, "%s/.hrad-tmp-%ld", c->outdir, (long)getpid());
-  if (mkdir(c->tmpdir, 0777) != 0) {
-    char m[8300];
-    snprintf(m, sizeof m, "%s: cannot create directory: %s", c->tmpdir, strerror(errno));
-    c->tmpdir[0] = 0;
-    fail(m);
-  }
-  c->outdir_made = 1;
+  int ok = fflush(f) == 0 && !ferror(f), e = ok ? 0 : errno;
+  if (fclose(f) != 0 && ok) ok = 0, e = errno;
+  if (!ok) fail("%s: write failed: %s", path, strerror(e ? e : EIO));
 }
 
-static void tmp_path(const cli *c, const char *name, char *out, size_t n) {
-  snprintf(out, n, "%s/%s", c->tmpdir, name);
+/* Without renameat2 (some network file systems): the files of the set are renamed into DIR one
+ * by one and the previous set's other files removed; not atomic as a set. */
+static void commit_by_file(cli *c, const names *old) {
+  fprintf(stderr,
+          "hrad: warning: %s: this file system cannot exchange directories; the outputs are "
+          "replaced one by one\n",
+          c->disp);
+  char from[sizeof c->stage + 300], to[PATH_MAX + 300];
+  for (int i = 0; i <= c->outs.n; i++) {
+    const char *n = i < c->outs.n ? c->outs.v[i] : MANIFEST;
+    join(from, sizeof from, c->stage, n);
+    join(to, sizeof to, c->dir, n);
+    if (rename(from, to) != 0)
+      fail("%s/%s: cannot move into place: %s", c->disp, n, strerror(errno));
+  }
+  for (int i = 0; i < old->n; i++)
+    if (!names_has(&c->outs, old->v[i])) {
+      join(to, sizeof to, c->dir, old->v[i]);
+      unlink(to);
+    }
+  rm_flat(c->stage);
 }
 
-static void check(hr_status st, const hr_err *err) {
-  if (st != HR_OK) fail(err->msg);
+/* Makes the staging directory DIR: see the file comment. */
+static void commit(cli *c) {
+  lock();
+  write_manifest(c);
+  char mk[sizeof c->stage + 32];
+  join(mk, sizeof mk, c->stage, MARKER);
+  for (int attempt = 0;; attempt++) {
+    if (attempt == 8) fail("%s: kept changing while the outputs were committed; nothing written",
+                           c->disp);
+    struct stat st;
+    if (lstat(c->dir, &st) != 0) {
+      if (errno != ENOENT) fail("%s: %s", c->disp, strerror(errno));
+      unlink(mk);
+      if (renameat2(AT_FDCWD, c->stage, AT_FDCWD, c->dir, RENAME_NOREPLACE) == 0) break;
+      int e = errno;
+      if (e == EINVAL || e == ENOSYS) { /* no flags here: rename replaces only an empty DIR */
+        if (rename(c->stage, c->dir) == 0) break;
+        e = errno;
+      }
+      if (e == EEXIST || e == ENOTEMPTY) continue; /* DIR appeared meanwhile */
+      fail("%s: cannot move the outputs into place: %s", c->disp, strerror(e));
+    }
+    if (!S_ISDIR(st.st_mode)) fail("%s: no longer a directory; nothing written", c->disp);
+    names old = {0};
+    read_manifest(c->dir, &old);
+    carry_over(c, &old);
+    chmod(c->stage, st.st_mode & 07777);
+    unlink(mk);
+    if (renameat2(AT_FDCWD, c->stage, AT_FDCWD, c->dir, RENAME_EXCHANGE) == 0) {
+      /* the staging name now holds the previous DIR */
+      if (!tidy_old(c->stage, c->dir, &old, &c->outs))
+        fprintf(stderr,
+                "hrad: warning: %s: the previous contents of %s, left there because they hold "
+                "files that hrad did not write\n",
+                c->stage, c->disp);
+      names_free(&old);
+      break;
+    }
+    int e = errno;
+    if (e == ENOENT) { /* DIR went away meanwhile */
+      drop_carried(c);
+      names_free(&old);
+      continue;
+    }
+    if (e == EINVAL || e == ENOSYS || e == EXDEV) {
+      commit_by_file(c, &old);
+      names_free(&old);
+      break;
+    }
+    fail("%s: cannot exchange it with the new outputs: %s", c->disp, strerror(e));
+  }
+  c->stage[0] = 0;
+  if (c->stage_fd >= 0) close(c->stage_fd);
+  c->stage_fd = -1;
+  unlock();
+}
+
+/* ---------------------------------------------------------------- output files */
+
+static const char *render_error(hr_status st) {
+  return st == HR_ERR_NOMEM     ? "rendering failed: out of memory"
+         : st == HR_ERR_TOO_BIG ? "rendering failed: image too large"
+                                : "rendering failed";
+}
+
+static void render(const cli *c, const hr_mesh *m, const hr_leaf *leaves, int64_t n, int mode,
+                   double clamp, float *img) {
+  hr_status st = hr_render_ex(c->scene, m, leaves, n, &c->cam, c->w, c->h, mode, 2, clamp, img);
+  if (st != HR_OK) fail("%s", render_error(st));
 }
 
 /* The current solution's leaves ('*leaves', '*n'; caller frees) and smooth mesh (returned;
@@ -277,13 +1022,55 @@ static hr_mesh *solution_mesh(const cli *c, const hr_solver *s, hr_leaf **leaves
                               double *expo) {
   if (hr_solver_leaves(s, leaves, n) != HR_OK) fail("out of memory");
   hr_mesh *m;
-  check(hr_mesh_build(c->scene, *leaves, *n, &m), &(hr_err){.msg = "out of memory building mesh"});
+  hr_status st = hr_mesh_build(c->scene, *leaves, *n, &m);
+  if (st != HR_OK) fail("building the mesh failed%s", st == HR_ERR_NOMEM ? ": out of memory" : "");
   *expo = c->exposure > 0 ? c->exposure : hr_exposure_auto(m);
   return m;
 }
 
-/* Renders the current solution from the run's camera and writes 'name' (PNG) into tmpdir. With
- * 'all' it also writes the elements image, PLY, GLB, viewer and PFM. */
+/* A solution with an infinite or NaN radiosity is never written (a wrong answer must not come
+ * with exit status 0). */
+static void check_finite(const cli *c, const hr_solver *s) {
+  hr_leaf *l;
+  int64_t n;
+  if (hr_solver_leaves(s, &l, &n) != HR_OK) fail("out of memory");
+  for (int64_t i = 0; i < n; i++)
+    for (int k = 0; k < 3; k++)
+      if (!isfinite(l[i].B[k])) {
+        double b = l[i].B[k];
+        int surf = l[i].surf;
+        free(l);
+        fail("%s: the solution is not finite (radiosity %g on surface %d); nothing written",
+             c->scene->name, b, surf);
+      }
+  free(l);
+}
+
+/* A warning when no light reaches any surface that does not emit: the usual cause is polygons
+ * wound the wrong way (surfaces are one-sided, lit from the side they face). */
+static void check_lit(const cli *c, const hr_solver *s) {
+  const hr_scene *sc = c->scene;
+  int others = 0;
+  for (int i = 0; i < sc->nsurfs; i++) {
+    const int p = sc->surfs[i].poly, m = sc->surfs[i].material;
+    if ((i > 0 && sc->surfs[i - 1].poly == p) ||
+        sc->mats[m].emit[0] + sc->mats[m].emit[1] + sc->mats[m].emit[2] > 0)
+      continue; /* a polygon's surfaces are consecutive */
+    others++;
+    double b[3];
+    hr_solver_poly_radiosity(s, p, b);
+    if (b[0] + b[1] + b[2] > 0) return;
+  }
+  if (others > 0 && !c->quiet)
+    fprintf(stderr,
+            "hrad: warning: %s: no light reaches any of the %d polygons that do not emit; "
+            "surfaces are one-sided, lit on the side from which their vertices run "
+            "counter-clockwise: are the polygons (or the lamps) wound the other way?\n",
+            sc->name, others);
+}
+
+/* Renders the current solution from the run's camera and writes 'png_name' into the staging
+ * directory. With 'all' it also writes the elements image, PLY, GLB, viewer and PFM. */
 static void write_pictures(cli *c, const hr_solver *s, const char *png_name, int all) {
   hr_err err = {{0}};
   hr_leaf *leaves;
@@ -292,41 +1079,64 @@ static void write_pictures(cli *c, const hr_solver *s, const char *png_name, int
   hr_mesh *m = solution_mesh(c, s, &leaves, &n, &expo);
   float *img = malloc((size_t)c->w * c->h * 3 * sizeof *img);
   if (!img) fail("out of memory");
-  char path[8400];
-  check(hr_render_ex(c->scene, m, leaves, n, &c->cam, c->w, c->h, 0, 2, 1.0 / expo, img),
-        &(hr_err){.msg = "render failed"});
-  tmp_path(c, png_name, path, sizeof path);
-  check(hr_png_write(path, c->w, c->h, img, expo, &err), &err);
+  char path[sizeof c->stage + 300];
+  render(c, m, leaves, n, 0, 1.0 / expo, img);
+  lock();
+  check(hr_png_write(stage_file(c, png_name, path, sizeof path), c->w, c->h, img, expo, &err),
+        &err);
+  unlock();
   if (all) {
     const char *nm = c->scene->name;
-    char name[4200];
+    char name[PATH_MAX];
     if (c->hdr) {
-      check(hr_render_ex(c->scene, m, leaves, n, &c->cam, c->w, c->h, 0, 2, 0, img),
-            &(hr_err){.msg = "render failed"});
+      check_stop(c);
+      render(c, m, leaves, n, 0, 0, img);
       snprintf(name, sizeof name, "%s.pfm", nm);
-      tmp_path(c, name, path, sizeof path);
-      check(hr_pfm_write(path, c->w, c->h, img, &err), &err);
+      lock();
+      check(hr_pfm_write(stage_file(c, name, path, sizeof path), c->w, c->h, img, &err), &err);
+      unlock();
     }
-    check(hr_render_ex(c->scene, m, leaves, n, &c->cam, c->w, c->h, 1, 2, 1.0 / expo, img),
-          &(hr_err){.msg = "render failed"});
+    check_stop(c);
+    render(c, m, leaves, n, 1, 1.0 / expo, img);
     snprintf(name, sizeof name, "%s-elements.png", nm);
-    tmp_path(c, name, path, sizeof path);
-    check(hr_png_write(path, c->w, c->h, img, expo, &err), &err);
+    lock();
+    check(hr_png_write(stage_file(c, name, path, sizeof path), c->w, c->h, img, expo, &err), &err);
+    unlock();
+    check_stop(c);
+    lock();
     snprintf(name, sizeof name, "%s.ply", nm);
-    tmp_path(c, name, path, sizeof path);
-    check(hr_ply_write(path, m, expo, &err), &err);
+    check(hr_ply_write(stage_file(c, name, path, sizeof path), m, expo, &err), &err);
     snprintf(name, sizeof name, "%s.glb", nm);
-    tmp_path(c, name, path, sizeof path);
-    check(hr_glb_write(path, m, expo, &err), &err);
-    tmp_path(c, "viewer.html", path, sizeof path);
-    if (hr_viewer_write(path, name, &err) != HR_OK)
-      fprintf(stderr, "hrad: warning: viewer.html not written: %s\n", err.msg);
+    check(hr_glb_write(stage_file(c, name, path, sizeof path), m, expo, &err), &err);
+    if (c->viewer)
+      check(hr_viewer_write(stage_file(c, "viewer.html", path, sizeof path), name, &err), &err);
+    unlock();
   }
   free(img);
   hr_mesh_destroy(&m);
   free(leaves);
 }
 
+/* --snapshots: iter-NN.png joins the set and is hard-linked into DIR at once, to be watched. */
+static void snapshot(cli *c, const hr_solver *s, int iter) {
+  char name[64], from[sizeof c->stage + 64], tmp[PATH_MAX + 64], to[PATH_MAX + 64];
+  snprintf(name, sizeof name, "iter-%02d.png", iter);
+  write_pictures(c, s, name, 0);
+  c->nsnap++;
+  lock();
+  if (mkdir(c->dir, 0777) != 0 && errno != EEXIST)
+    fail("%s: cannot create directory: %s", c->disp, strerror(errno));
+  join(from, sizeof from, c->stage, name);
+  snprintf(tmp, sizeof tmp, "%s/%s%ld", c->dir, SNAP_TMP, (long)getpid());
+  join(to, sizeof to, c->dir, name);
+  unlink(tmp);
+  if (link(from, tmp) != 0 || rename(tmp, to) != 0) {
+    int e = errno;
+    unlink(tmp);
+    fail("%s/%s: cannot write the snapshot: %s", c->disp, name, strerror(e));
+  }
+  unlock();
+}
 /* ---------------------------------------------------------------- --verify, --verify-image */
 
 static double now_s(void) {
@@ -380,12 +1190,14 @@ static void csv_field(FILE *f, const char *s) {
   fputc('"', f);
 }
 
-/* verify.csv in tmpdir: one row per polygon (rel_err is nan where the reference is 0). */
-static void write_verify_csv(const cli *c, const vrow *rows) {
-  char path[8400];
-  tmp_path(c, "verify.csv", path, sizeof path);
+/* verify.csv in the staging directory: one row per polygon (rel_err is nan where the reference
+ * is 0). */
+static void write_verify_csv(cli *c, const vrow *rows) {
+  char path[sizeof c->stage + 32];
+  lock();
+  stage_file(c, "verify.csv", path, sizeof path);
   FILE *f = fopen(path, "w");
-  if (!f) fail("verify.csv: cannot write");
+  if (!f) fail("%s: cannot write: %s", path, strerror(errno));
   fprintf(f, "id,area,material,emitter,hrad_r,hrad_g,hrad_b,ref_r,ref_g,ref_b,se_r,se_g,se_b,"
              "rel_err\n");
   for (int p = 0; p < c->scene->npolys; p++) {
@@ -396,35 +1208,38 @@ static void write_verify_csv(const cli *c, const vrow *rows) {
             r->hrad[1], r->hrad[2], r->ref[0], r->ref[1], r->ref[2], r->se[0], r->se[1], r->se[2],
             r->rel);
   }
-  int bad = ferror(f);
-  if (fclose(f) != 0 || bad) fail("verify.csv: write failed");
+  int ok = fflush(f) == 0 && !ferror(f), e = ok ? 0 : errno;
+  if (fclose(f) != 0 && ok) ok = 0, e = errno;
+  if (!ok) fail("%s: write failed: %s", path, strerror(e ? e : EIO));
+  unlock();
 }
 
-/* The per-polygon table on stderr: hrad's radiosity, the reference with its 95% confidence
- * interval (1.96 standard errors) per channel, and the relative error. */
-static void print_verify_table(const hr_scene *sc, const vrow *rows, int64_t paths) {
-  fprintf(stderr, "verify: %lld paths per polygon\n", (long long)paths);
-  fprintf(stderr, "verify:   id material           area       hrad r, g, b                 "
+/* The per-polygon table (to c->rep, see there): hrad's radiosity, the reference with its 95%
+ * confidence interval (1.96 standard errors) per channel, and the relative error. */
+static void print_verify_table(const cli *c, const hr_scene *sc, const vrow *rows,
+                               int64_t paths) {
+  fprintf(c->rep, "verify: %lld paths per polygon\n", (long long)paths);
+  fprintf(c->rep, "verify:   id material           area       hrad r, g, b                 "
                   "reference r, g, b (+- 95%%)                  rel.err\n");
   for (int p = 0; p < sc->npolys; p++) {
     const vrow *r = &rows[p];
-    fprintf(stderr, "verify: %4d %-16.16s %9.4g  %8.4g %8.4g %8.4g  ", hr_scene_poly_input(sc, p),
+    fprintf(c->rep, "verify: %4d %-16.16s %9.4g  %8.4g %8.4g %8.4g  ", hr_scene_poly_input(sc, p),
             mat_name(sc, r->mat),
             sc->poly_area[p], r->hrad[0], r->hrad[1], r->hrad[2]);
-    for (int k = 0; k < 3; k++) fprintf(stderr, " %8.4g+-%-7.2g", r->ref[k], 1.96 * r->se[k]);
+    for (int k = 0; k < 3; k++) fprintf(c->rep, " %8.4g+-%-7.2g", r->ref[k], 1.96 * r->se[k]);
     if (isnan(r->rel))
-      fprintf(stderr, "       -");
+      fprintf(c->rep, "       -");
     else
-      fprintf(stderr, " %7.2f%%", 100 * r->rel);
-    fprintf(stderr, "%s\n", r->emitter ? " emitter" : "");
+      fprintf(c->rep, " %7.2f%%", 100 * r->rel);
+    fprintf(c->rep, "%s\n", r->emitter ? " emitter" : "");
   }
 }
 
 /* The summary line: area-weighted RMS of the relative error over non-emitting polygons with a
  * non-zero reference, the worst of them, and the reference's own noise (area-weighted RMS of
  * |se| / |ref|). */
-static void print_verify_summary(const hr_scene *sc, const vrow *rows, double secs,
-                                 int64_t paths) {
+static void print_verify_summary(const cli *c, const hr_scene *sc, const vrow *rows,
+                                 double secs, int64_t paths) {
   double sa = 0, se2 = 0, sn2 = 0, worst = -1;
   int cnt = 0, wp = -1;
   for (int p = 0; p < sc->npolys; p++) {
@@ -439,10 +1254,10 @@ static void print_verify_summary(const hr_scene *sc, const vrow *rows, double se
   }
   double rate = secs > 0 ? (double)paths * sc->npolys / secs : 0;
   if (cnt == 0 || !(sa > 0)) {
-    fprintf(stderr, "verify: no lit non-emitting polygon to compare; path tracer %.1f s\n", secs);
+    fprintf(c->rep, "verify: no lit non-emitting polygon to compare; path tracer %.1f s\n", secs);
     return;
   }
-  fprintf(stderr,
+  fprintf(c->rep,
           "verify: area-weighted RMS error %.2f%% over %d non-emitting polygons, worst %.2f%% "
           "(polygon %d, %s); reference noise %.2f%%; path tracer %.1f s (%.3g paths/s)\n",
           100 * sqrt(se2 / sa), cnt, 100 * worst, hr_scene_poly_input(sc, wp),
@@ -451,7 +1266,7 @@ static void print_verify_summary(const hr_scene *sc, const vrow *rows, double se
 }
 
 /* --verify: traces every polygon with c->verify_paths paths, compares with the solution 's',
- * prints the table (unless --quiet) and the summary, and writes verify.csv into tmpdir. */
+ * prints the table (unless --quiet) and the summary, and writes verify.csv. */
 static void verify_polys(cli *c, const hr_solver *s) {
   const hr_scene *sc = c->scene;
   hr_err err = {{0}};
@@ -470,9 +1285,9 @@ static void verify_polys(cli *c, const hr_solver *s) {
     memcpy(rows[p].se, se[p], sizeof rows[p].se);
     rows[p].rel = rel_err(rows[p].hrad, rows[p].ref);
   }
-  if (!c->quiet) print_verify_table(sc, rows, c->verify_paths);
-  print_verify_summary(sc, rows, secs, c->verify_paths);
   write_verify_csv(c, rows);
+  if (!c->quiet) print_verify_table(c, sc, rows, c->verify_paths);
+  print_verify_summary(c, sc, rows, secs, c->verify_paths);
   free(rows);
   free(mean);
   free(se);
@@ -484,7 +1299,7 @@ static double normf3(const float *v) {
 
 /* The mean relative per-pixel error |img - ref| / |ref| (RGB norms) over the pixels whose
  * reference exceeds 1% of the image's mean |ref|, with the mean relative noise of the reference
- * over the same pixels, as one line on stderr. */
+ * over the same pixels, as one line (to c->rep). */
 static void print_image_error(const cli *c, const float *img, const float *ref, const float *se,
                               double secs) {
   size_t np = (size_t)c->w * c->h, cnt = 0;
@@ -500,17 +1315,17 @@ static void print_image_error(const cli *c, const float *img, const float *ref, 
     cnt++;
   }
   if (cnt == 0) {
-    fprintf(stderr, "verify-image: the reference image is black; path tracer %.1f s\n", secs);
+    fprintf(c->rep, "verify-image: the reference image is black; path tracer %.1f s\n", secs);
     return;
   }
-  fprintf(stderr,
+  fprintf(c->rep,
           "verify-image: mean relative per-pixel error %.2f%% over %zu of %zu pixels (reference "
           "above 1%% of its mean); reference noise %.2f%%; %dx%d at %d spp, path tracer %.1f s\n",
           100 * err / cnt, cnt, np, 100 * noise / cnt, c->w, c->h, c->verify_spp, secs);
 }
 
 /* --verify-image: path-traces the run's view at c->verify_spp samples per pixel, writes
- * SCENE-reference.png (the exposure of SCENE.png) into tmpdir, and compares hrad's smooth
+ * SCENE-reference.png (the exposure of SCENE.png), and compares hrad's smooth
  * rendering (linear, unclamped) with it. */
 static void verify_image(cli *c, const hr_solver *s) {
   hr_err err = {{0}};
@@ -522,16 +1337,17 @@ static void verify_image(cli *c, const hr_solver *s) {
   float *img = malloc(3 * np * sizeof *img), *ref = malloc(3 * np * sizeof *ref);
   float *se = malloc(3 * np * sizeof *se);
   if (!img || !ref || !se) fail("out of memory");
-  check(hr_render_ex(c->scene, m, leaves, n, &c->cam, c->w, c->h, 0, 2, -1, img),
-        &(hr_err){.msg = "render failed"});
+  render(c, m, leaves, n, 0, -1, img);
   hr_pt_options o = {1, c->opt.seed, c->opt.threads};
   double t0 = now_s();
   check(hr_pt_image(c->scene, &c->cam, c->w, c->h, c->verify_spp, &o, ref, se, &err), &err);
   double secs = now_s() - t0;
-  char name[4200], path[8400];
+  check_stop(c);
+  char name[PATH_MAX], path[sizeof c->stage + PATH_MAX];
   snprintf(name, sizeof name, "%s-reference.png", c->scene->name);
-  tmp_path(c, name, path, sizeof path);
-  check(hr_png_write(path, c->w, c->h, ref, expo, &err), &err);
+  lock();
+  check(hr_png_write(stage_file(c, name, path, sizeof path), c->w, c->h, ref, expo, &err), &err);
+  unlock();
   print_image_error(c, img, ref, se, secs);
   free(img);
   free(ref);
@@ -540,26 +1356,19 @@ static void verify_image(cli *c, const hr_solver *s) {
   free(leaves);
 }
 
-/* Moves every file of tmpdir into outdir, then removes tmpdir. */
-static void commit_outputs(cli *c) {
-  DIR *d = opendir(c->tmpdir);
-  if (!d) fail("cannot read the temporary output directory");
-  struct dirent *e;
-  char from[8400], to[8400];
-  while ((e = readdir(d))) {
-    if (e->d_name[0] == '.') continue;
-    snprintf(from, sizeof from, "%s/%s", c->tmpdir, e->d_name);
-    snprintf(to, sizeof to, "%s/%s", c->outdir, e->d_name);
-    if (rename(from, to) != 0) {
-      char m[9000];
-      snprintf(m, sizeof m, "%s: cannot rename into place: %s", to, strerror(errno));
-      closedir(d);
-      fail(m);
-    }
+
+/* ---------------------------------------------------------------- the run */
+
+/* Writes the checkpoint (state after iteration 'iter'); a failure is a warning, the run goes
+ * on. */
+static void save_ckpt(cli *c, const hr_solver *s, int iter) {
+  hr_err err = {{0}};
+  if (hr_solver_checkpoint(s, c->ckpt, &err) != HR_OK) {
+    fprintf(stderr, "hrad: warning: checkpoint not written: %s\n", err.msg);
+    return;
   }
-  closedir(d);
-  rmdir(c->tmpdir);
-  c->tmpdir[0] = 0;
+  c->ckpt_last = now_s();
+  c->ckpt_iter = iter;
 }
 
 static int on_iter(void *ud, const hr_solver *s, const hr_iter_info *it) {
@@ -569,18 +1378,18 @@ static int on_iter(void *ud, const hr_solver *s, const hr_iter_info *it) {
             "iter %3d  BF_e %.3e  elements %9lld  links %10lld  max change %.3e  %8.3f s\n",
             it->iter, it->bf_e, (long long)it->elements, (long long)it->links, it->max_change,
             it->elapsed_s);
-  if (c->snapshots) {
-    /* Snapshots go straight into DIR (renamed into place one by one) so a long run can be
-     * watched; they are progress, not results. */
-    ensure_outdir(c);
-    char name[64], from[8400], to[8400];
-    snprintf(name, sizeof name, "iter-%02d.png", it->iter);
-    write_pictures(c, s, name, 0);
-    tmp_path(c, name, from, sizeof from);
-    snprintf(to, sizeof to, "%s/%s", c->outdir, name);
-    if (rename(from, to) != 0) fail("cannot write snapshot");
+  if (atomic_load(&g_stop)) {
+    if (c->ckpt) {
+      save_ckpt(c, s, it->iter);
+      if (c->ckpt_iter == it->iter)
+        fprintf(stderr, "hrad: saved iteration %d to %s; continue with --resume %s\n", it->iter,
+                c->ckpt, c->ckpt);
+    }
+    return 1;
   }
-  return 0;
+  if (c->ckpt && now_s() - c->ckpt_last >= c->ckpt_every) save_ckpt(c, s, it->iter);
+  if (c->snapshots) snapshot(c, s, it->iter);
+  return atomic_load(&g_stop) != 0;
 }
 
 static int is_builtin(const char *name) {
@@ -589,11 +1398,34 @@ static int is_builtin(const char *name) {
   return 0;
 }
 
+/* "hrad: wrote DIR/{a,b,...}" and the number of snapshots. */
+static void print_wrote(const cli *c) {
+  fprintf(stderr, "hrad: wrote %s/{", c->disp);
+  int k = 0;
+  for (int i = 0; i < c->outs.n; i++)
+    if (strncmp(c->outs.v[i], "iter-", 5)) fprintf(stderr, "%s%s", k++ ? "," : "", c->outs.v[i]);
+  fprintf(stderr, "}");
+  if (c->nsnap) fprintf(stderr, " and %d snapshots iter-NN.png", c->nsnap);
+  fprintf(stderr, "\n");
+}
+
 int main(int argc, char **argv) {
-  cli c;
-  memset(&c, 0, sizeof c);
+  static cli c;
+  c.stage_fd = -1;
   g_cli = &c;
+  pthread_mutexattr_t ma;
+  pthread_mutexattr_init(&ma);
+  pthread_mutexattr_settype(&ma, PTHREAD_MUTEX_RECURSIVE);
+  pthread_mutex_init(&g_lock, &ma);
   parse_args(&c, argc, argv);
+  start_signals();
+  prepare_outdir(&c);
+  c.viewer = three_available();
+  if (!c.viewer)
+    fprintf(stderr,
+            "hrad: warning: %s: three.js not found, so no viewer.html (run scripts/setup.sh, or "
+            "set HRAD_THREE_DIR)\n",
+            hr_viewer_three_dir());
   hr_err err = {{0}};
   hr_log log = {c.quiet ? NULL : warn_cb, NULL};
   hr_scene *scene = NULL;
@@ -605,15 +1437,15 @@ int main(int argc, char **argv) {
     struct stat sb;
     if (stat(c.scene_arg, &sb) != 0 && !(l > 4 && !strcmp(c.scene_arg + l - 4, ".obj")) &&
         !strchr(c.scene_arg, '/')) {
-      fprintf(stderr,
-              "hrad: unknown scene '%s' (built-in: room, floor, museum, cornell; or a path to an "
-              ".obj file)\n",
-              c.scene_arg);
-      return 1;
+      char list[256] = "";
+      for (const char *const *n = hr_scene_builtin_names(); *n; n++)
+        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", list[0] ? ", " : "", *n);
+      fail("unknown scene '%s' (built-in: %s; or a path to an .obj file)", c.scene_arg, list);
     }
     st = hr_scene_load_obj(c.scene_arg, &log, &scene, &err);
   }
   check(st, &err);
+  check_stop(&c);
   for (int i = 0; i < c.nemit; i++) {
     check(hr_scene_set_emit(scene, c.emit_name[i], c.emit_rgb[i], &err), &err);
     free(c.emit_name[i]);
@@ -626,27 +1458,53 @@ int main(int argc, char **argv) {
   else hr_scene_auto_camera(scene, &c.cam);
   hr_solver *s = NULL;
   check(hr_solver_create(scene, &c.opt, &s, &err), &err);
+  if (c.resume) {
+    check(hr_solver_resume(s, c.resume, &err), &err);
+    if (!c.quiet) {
+      hr_stats rs;
+      hr_solver_stats(s, &rs);
+      fprintf(stderr, "hrad: resumed from %s after iteration %d%s\n", c.resume, rs.iterations,
+              rs.converged ? " (already converged)" : "");
+    }
+  }
   if (!c.quiet) {
     hr_vec3 lo, hi;
     hr_scene_bounds(scene, &lo, &hi);
     fprintf(stderr,
             "hrad: scene '%s': %d polygons, %d surfaces, %d materials, area %.4g, bounds "
-            "(%.3g %.3g %.3g)-(%.3g %.3g %.3g)\n",
+            "(%.6g %.6g %.6g)-(%.6g %.6g %.6g)\n",
             scene->name, scene->npolys, scene->nsurfs, scene->nmats, hr_scene_total_area(scene),
             lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
   }
-  check(hr_solver_run(s, on_iter, &c, &err), &err);
-  ensure_outdir(&c);
-  char path[8400], name[4200];
-  tmp_path(&c, "surfaces.csv", path, sizeof path);
-  check(hr_report_csv(path, s, &err), &err);
-  tmp_path(&c, "stats.json", path, sizeof path);
-  check(hr_report_json(path, s, &c.opt, &err), &err);
+  c.ckpt_last = now_s();
+  st = hr_solver_run(s, on_iter, &c, &err);
+  check_stop(&c);
+  check(st, &err);
+  if (c.ckpt) {
+    hr_stats es;
+    hr_solver_stats(s, &es);
+    if (c.ckpt_iter != es.iterations) save_ckpt(&c, s, es.iterations);
+  }
+  check_finite(&c, s);
+  check_lit(&c, s);
+  char path[sizeof c.stage + 300], name[PATH_MAX];
+  c.rep = open_memstream(&c.rep_buf, &c.rep_len);
+  if (!c.rep) c.rep = stderr;
+  lock();
+  check(hr_report_csv(stage_file(&c, "surfaces.csv", path, sizeof path), s, &err), &err);
+  check(hr_report_json(stage_file(&c, "stats.json", path, sizeof path), s, &c.opt, &err), &err);
+  unlock();
+  check_stop(&c);
   snprintf(name, sizeof name, "%s.png", scene->name);
   write_pictures(&c, s, name, 1);
+  check_stop(&c);
   if (c.verify_paths) verify_polys(&c, s);
+  check_stop(&c);
   if (c.verify_spp) verify_image(&c, s);
-  commit_outputs(&c);
+  check_stop(&c);
+  commit(&c);
+  if (c.rep != stderr && fclose(c.rep) == 0 && c.rep_buf) fputs(c.rep_buf, stderr);
+  free(c.rep_buf);
   hr_stats stats;
   hr_solver_stats(s, &stats);
   if (!c.quiet) {
@@ -654,11 +1512,9 @@ int main(int argc, char **argv) {
     if (!stats.converged)
       fprintf(stderr, "hrad: warning: stopped after %d iterations without converging\n",
               stats.iterations);
-    fprintf(stderr, "hrad: wrote %s/{surfaces.csv,stats.json,%s.png,%s-elements.png,%s.ply,%s.glb,"
-            "viewer.html%s%s%s%s}\n", c.outdir, scene->name, scene->name, scene->name, scene->name,
-            c.verify_paths ? ",verify.csv" : "", c.verify_spp ? "," : "",
-            c.verify_spp ? scene->name : "", c.verify_spp ? "-reference.png" : "");
+    print_wrote(&c);
   }
+  names_free(&c.outs);
   hr_solver_destroy(&s);
   hr_scene_destroy(&scene);
   return 0;
