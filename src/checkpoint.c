@@ -21,7 +21,7 @@
 #include <string.h>
 
 #define MAGIC "HRADCKP1"
-#define VERSION 2u
+#define VERSION 3u
 
 /* ---------------------------------------------------------------- hashing */
 
@@ -75,8 +75,8 @@ static void put(writer *w, const void *p, size_t n) {
 /* The progress of Figure 3. */
 typedef struct progress {
   int32_t iterations, converged, done, stopped;
-  double bf_e, unit, prev_change;
-  int64_t rays, initial_links;
+  double bf_e, unit, prev_change, prev_abs;
+  int64_t stall, rays, initial_links;
   hr_timing t;
 } progress;
 
@@ -140,8 +140,9 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
   put(&w, &version, sizeof version);
   put(&w, &hs, sizeof hs);
   put(&w, &ho, sizeof ho);
-  progress pr = {s->iterations, s->converged,  s->done, s->stopped,    s->bf_e,
-                 s->unit,       s->prev_change, s->rays, s->initial_links, s->t};
+  progress pr = {s->iterations, s->converged, s->done,  s->stopped,
+                 s->bf_e,       s->unit,      s->prev_change, s->prev_abs,
+                 s->stall,      s->rays,      s->initial_links, s->t};
   put(&w, &pr, sizeof pr);
   put(&w, &s->nel, sizeof s->nel);
   for (int64_t i = 0; i < s->nel; i++) {
@@ -412,7 +413,7 @@ hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err) {
   if (st != HR_OK) return st;
   s->iterations = pr.iterations, s->converged = pr.converged, s->done = pr.done;
   s->stopped = pr.stopped, s->bf_e = pr.bf_e, s->unit = pr.unit, s->rays = pr.rays;
-  s->prev_change = pr.prev_change;
+  s->prev_change = pr.prev_change, s->prev_abs = pr.prev_abs, s->stall = pr.stall;
   s->initial_links = pr.initial_links, s->t = pr.t;
   s->started = 1;
   /* A run that stopped without converging (max_iters, or its callback) goes on when this

@@ -296,6 +296,36 @@ static hr_status check_physical(const hr_solver *s, hr_err *err) {
   return HR_OK;
 }
 
+/* The guard against a solve that cannot end: the iteration contracts by the spectral radius of
+ * rho F, which is below 1 only while the scene absorbs some light. In a closed scene whose
+ * materials reflect everything (exports that write Kd 1 1 1) it is 1, and the discretisation
+ * error of the form factors (row sums of a closed box about 0.8% above 1) takes it above 1: B
+ * then grows without bound (a white box reached 2e4 times its emission after 1000 iterations).
+ * STALL_N iterations in a row without new links whose largest change is at least STALL_Q times
+ * the one before mean a radius so near 1 that converging would take more than 1e4 iterations:
+ * an error naming the most reflective material. A scene that absorbs 1% contracts by 0.99. */
+#define STALL_Q 0.9995
+#define STALL_N 50
+static hr_status check_contracting(hr_solver *s, double abs, int64_t nnew, hr_err *err) {
+  if (nnew == 0 && s->prev_abs > 0 && abs >= STALL_Q * s->prev_abs) s->stall++;
+  else s->stall = 0;
+  const double q = s->prev_abs > 0 ? abs / s->prev_abs : 0;
+  s->prev_abs = abs;
+  if (s->stall < STALL_N) return HR_OK;
+  const hr_scene *sc = s->scene;
+  int mw = 0;
+  double rw = -1;
+  for (int m = 0; m < sc->nmats; m++)
+    for (int c = 0; c < 3; c++)
+      if (sc->mats[m].rho[c] > rw) rw = sc->mats[m].rho[c], mw = m;
+  return hr_err_set(err, HR_ERR_UNPHYSICAL,
+                    "the solution does not converge: the scene keeps nearly all its light (after "
+                    "%d iterations the largest change of radiosity is %.6f of the one before, %d "
+                    "times in a row); its most reflective material is '%s' (reflectance %g): "
+                    "lower the reflectances (real surfaces reflect at most about 0.9)",
+                    s->iterations + 1, q, STALL_N, sc->mats[mw].name, rw);
+}
+
 /* The radiosity unit (see solver_impl.h): the area-weighted mean radiosity of the surfaces,
  * largest channel, at least the mean emitted radiosity. */
 static void update_unit(hr_solver *s) {
@@ -341,8 +371,10 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
   double tb = hr_now();
   gather(s);
   double tc = hr_now();
-  *change = push_pull_all(s) / s->unit;
+  const double abs = push_pull_all(s);
+  *change = abs / s->unit;
   if ((st = check_physical(s, err)) != HR_OK) return st;
+  if ((st = check_contracting(s, abs, *nnew, err)) != HR_OK) return st;
   update_unit(s);
   double td = hr_now();
   s->t.refine += tb - ta;

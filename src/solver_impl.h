@@ -106,6 +106,8 @@ struct hr_solver {
   int stopped;        /* the caller's callback stopped the run */
   double bf_e;        /* BF_e of the next iteration */
   double prev_change; /* the last iteration's change at BF_low if it made no links, else 0 */
+  double prev_abs;    /* the last iteration's largest change of B (absolute) */
+  int64_t stall;      /* iterations in a row without new links whose change did not shrink */
   /* counters */
   int64_t rays, initial_links;
   int iterations, converged, threads;

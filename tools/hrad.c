@@ -1046,6 +1046,39 @@ static void check_finite(const cli *c, const hr_solver *s) {
   free(l);
 }
 
+/* Reflectance at or above this in any channel gets a warning (check_white). */
+#define RHO_WARN 0.99
+
+/* A warning naming the materials in use that reflect RHO_WARN or more of the light in some
+ * channel: no real surface does (white paint reflects about 0.85), but exports that keep the
+ * colour in a texture often write `Kd 1 1 1` everywhere. The solve stays bounded (a closed box
+ * of rho 1 has no steady state; the solver stops at its convergence test), but the result is
+ * far too bright and slow to converge. */
+static void check_white(const cli *c) {
+  const hr_scene *sc = c->scene;
+  if (c->quiet) return;
+  char *used = calloc((size_t)sc->nmats, 1);
+  if (!used) return;
+  for (int i = 0; i < sc->nsurfs; i++) used[sc->surfs[i].material] = 1;
+  char names[200] = "";
+  int n = 0;
+  for (int m = 0; m < sc->nmats; m++) {
+    const double *r = sc->mats[m].rho;
+    if (!used[m] || fmax(r[0], fmax(r[1], r[2])) < RHO_WARN) continue;
+    if (n++ < 4)
+      snprintf(names + strlen(names), sizeof names - strlen(names), "%s'%.40s'", n > 1 ? ", " : "",
+               sc->mats[m].name);
+  }
+  free(used);
+  if (n > 4) snprintf(names + strlen(names), sizeof names - strlen(names), " and %d more", n - 4);
+  if (n)
+    fprintf(stderr,
+            "hrad: warning: %s: %d material%s reflect%s %g%% or more of the light (%s); no real "
+            "surface does, and exports whose colour lives in a texture often write Kd 1 1 1: "
+            "expect a too bright result and slow convergence\n",
+            sc->name, n, n > 1 ? "s" : "", n > 1 ? "" : "s", RHO_WARN * 100, names);
+}
+
 /* A warning when no light reaches any surface that does not emit: the usual cause is polygons
  * wound the wrong way (surfaces are one-sided, lit from the side they face). */
 static void check_lit(const cli *c, const hr_solver *s) {
@@ -1453,6 +1486,7 @@ int main(int argc, char **argv) {
   free(c.emit_name);
   free(c.emit_rgb);
   c.scene = scene;
+  check_white(&c);
   if (c.have_camera) c.cam = c.camera;
   else if (scene->has_camera) c.cam = scene->camera;
   else hr_scene_auto_camera(scene, &c.cam);
