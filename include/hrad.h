@@ -24,7 +24,8 @@ typedef enum {
   HR_ERR_NOMEM,     /* allocation failed */
   HR_ERR_NO_EMITTER,/* scene has nothing that emits light */
   HR_ERR_TOO_BIG,   /* refused: work would exceed a stated limit */
-  HR_ERR_UNPHYSICAL /* the solution became non-finite or broke the physical bound E/(1-rho) */
+  HR_ERR_UNPHYSICAL,/* the solution became non-finite or broke the physical bound E/(1-rho) */
+  HR_ERR_REMOTE     /* another MPI rank failed (it reports why); this one stopped with it */
 } hr_status;
 
 typedef struct hr_err {
@@ -252,6 +253,24 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
  * be destroyed. A checkpoint of a run that ended without converging (its max_iters, or its
  * callback) continues up to this solver's max_iters (not part of "the options"). */
 hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err);
+
+/* Distributed solving over MPI processes (paper 2.2; docs/design.md, "Distribution").
+ * hr_dist_start starts MPI when this process was launched by mpirun (or another MPI launcher)
+ * and sets '*out'; otherwise '*out' is NULL (one process) and MPI is never touched. */
+typedef struct hr_dist hr_dist;
+hr_status hr_dist_start(int *argc, char ***argv, hr_dist **out, hr_err *err);
+void hr_dist_finish(hr_dist **d);       /* MPI_Finalize if hr_dist_start initialised MPI */
+void hr_dist_abort(const hr_dist *d, int code); /* ends every rank (MPI_Abort); no-op for NULL */
+int hr_dist_rank(const hr_dist *d);     /* 0 for NULL */
+int hr_dist_size(const hr_dist *d);     /* 1 for NULL */
+/* Spreads the solve over the ranks of 'd' (call on every rank, before hr_solver_run, with the
+ * same scene, options and 'owner'): owner[i] is the rank that holds surface i's element tree and
+ * the links it receives; NULL spreads the surfaces by area, largest first, each to the rank
+ * with the least area so far. Every rank then calls hr_solver_run; each holds every element's
+ * radiosity afterwards (for outputs) but only its own links. Results, counts and outputs are
+ * bit-identical to one process for any 'owner'. HR_ERR_INVALID for a bad owner; checkpoints
+ * are not written or read with more than one rank yet. */
+hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, hr_err *err);
 
 /* Area-weighted mean radiosity of input polygon 'poly' (rgb out). */
 void hr_solver_poly_radiosity(const hr_solver *s, int poly, double rgb[3]);

@@ -104,6 +104,9 @@ static int cmp_link_key(const void *a, const void *b) {
 }
 
 hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err) {
+  if (s->dist)
+    return hr_err_set(err, HR_ERR_INVALID,
+                      "checkpoints with more than one MPI rank are not supported yet");
   if (!s->started)
     return hr_err_set(err, HR_ERR_INVALID, "%s: nothing to save before the first iteration", path);
   /* Canonical orders: (gid, idx) pairs for elements, (receiver gid, source gid, idx) for the
@@ -362,6 +365,9 @@ static int read_links(hr_solver *s, reader *r, const gid_map *m, const char *pat
 }
 
 hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err) {
+  if (s->dist)
+    return hr_err_set(err, HR_ERR_INVALID,
+                      "checkpoints with more than one MPI rank are not supported yet");
   if (s->started || s->nel != s->scene->nsurfs)
     return hr_err_set(err, HR_ERR_INVALID, "%s: resume needs a solver that has not run", path);
   size_t len = 0;

@@ -10,6 +10,7 @@
  * children into slots fixed by a prefix sum. Children inherit their parent's candidate list and
  * shrink it to their own shaft; links whose elements face away get F = 0. The children become the
  * next round's active links, until no link splits. */
+#include "mpi/dist.h"
 #include "solver_impl.h"
 #include "vec.h"
 
@@ -275,7 +276,11 @@ static void init_row(const hr_solver *s, int i, row *rw) {
   hr_blockers_clear(&blk);
   pending pd;
   pd.n = pd.segs = 0;
+  const int P = hr_dist_size(s->dist);
   for (int j = i + 1; j < sc->nsurfs; j++) {
+    /* distributed: pair (i, j) is evaluated by rank (i + j) mod P, an even spread of the
+     * O(n^2) pairs (paper 2.2.1); its two links then go to their receivers' owners */
+    if (P > 1 && (i + j) % P != s->rank) continue;
     const hr_ff_elem gj = hr_elem_geom(s, &s->el[j]);
     if (!elem_in_front(&gi, &gj) || !elem_in_front(&gj, &gi)) continue;
     /* Initial pairs whose decision samples are all blocked get no link at all: they decide with
@@ -289,6 +294,37 @@ static void init_row(const hr_solver *s, int i, row *rw) {
     pd.segs += k;
   }
   init_flush(s, i, &gi, &pd, &blk, rw);
+}
+
+/* Distributed initial linking: every link goes to the rank that owns its receiver's surface
+ * (receivers are roots here: element idx == surface). Links keep their order within each
+ * sender; the order does not matter (hr_link_sort orders each receiver's links by source gid). */
+static hr_status send_to_owners(hr_solver *s, hr_status st, hr_err *err) {
+  if (st != HR_OK) return st;
+  const int P = hr_dist_size(s->dist);
+  int64_t *cnt = calloc((size_t)P, sizeof *cnt), *rb = malloc((size_t)P * sizeof *rb);
+  hr_link *out = malloc((size_t)(s->nlinks > 0 ? s->nlinks : 1) * sizeof *out);
+  int64_t *at = calloc((size_t)P + 1, sizeof *at);
+  st = cnt && rb && out && at ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  if (hr_test_fail(s, HR_PHASE_INIT))
+    st = hr_err_set(err, HR_ERR_NOMEM, "out of memory (injected by HRAD_TEST_FAIL)");
+  if ((st = hr_dist_agree(s, st, err)) != HR_OK) {
+    free(cnt), free(rb), free(out), free(at);
+    return st;
+  }
+  for (int64_t k = 0; k < s->nlinks; k++) cnt[s->owner[s->links[k].r]]++;
+  for (int p = 0; p < P; p++) at[p + 1] = at[p] + cnt[p];
+  for (int64_t k = 0; k < s->nlinks; k++) out[at[s->owner[s->links[k].r]]++] = s->links[k];
+  for (int p = 0; p < P; p++) cnt[p] *= (int64_t)sizeof *out;
+  void *recv = NULL;
+  int64_t tot = 0;
+  st = hr_dist_alltoall(s->dist, out, cnt, &recv, &tot, rb);
+  free(cnt), free(rb), free(out), free(at);
+  if (st != HR_OK) return hr_err_set(err, st, "out of memory in initial linking");
+  free(s->links);
+  s->links = recv;
+  s->nlinks = s->cap_links = tot / (int64_t)sizeof(hr_link);
+  return HR_OK;
 }
 
 hr_status hr_link_init(hr_solver *s, hr_err *err) {
@@ -323,10 +359,11 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
       ol += rows[i].nlinks;
     }
     s->nlinks = nl;
-    s->initial_links = nl;
   }
   for (int i = 0; i < n; i++) free(rows[i].links);
   free(rows);
+  if (s->dist) st = send_to_owners(s, hr_dist_agree(s, st, err), err);
+  s->initial_links = s->nlinks;
   return st;
 }
 
@@ -404,21 +441,45 @@ static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uin
   return failed == 2 ? HR_ERR_TOO_BIG : failed ? HR_ERR_NOMEM : HR_OK;
 }
 
-hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
-  *nnew = 0;
-  /* Most iterations split nothing: decide for every link first, without copying the graph. */
-  uint8_t *dec = malloc((size_t)(s->nlinks > 0 ? s->nlinks : 1));
-  if (!dec) return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
+/* Subdivides the elements marked in mark[0, n) in increasing idx, so that element indices do not
+ * depend on the order of links; in a distributed run, the union of every rank's marks, so that
+ * every rank holds the same elements at the same indices. Then estimates the new elements' open
+ * fractions. A collective in distributed runs; every rank returns the same status. */
+static hr_status split_marked(hr_solver *s, const uint8_t *mark, int64_t n, hr_err *err) {
+  int64_t nm = 0;
+  for (int64_t e = 0; e < n; e++) nm += mark[e];
+  int32_t *mine = malloc((size_t)(nm > 0 ? nm : 1) * sizeof *mine), *all = NULL;
+  hr_status st = mine ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  if ((st = hr_dist_agree(s, st, err)) != HR_OK) {
+    free(mine);
+    return st;
+  }
+  for (int64_t e = 0, k = 0; e < n; e++)
+    if (mark[e]) mine[k++] = (int32_t)e;
+  int64_t nall = nm;
+  if (s->dist) {
+    st = hr_dist_union_i32(s->dist, mine, nm, &all, &nall);
+    free(mine);
+    if (st != HR_OK) return hr_err_set(err, st, "out of memory during refinement");
+  } else {
+    all = mine;
+  }
+  const int64_t nel0 = s->nel;
+  for (int64_t k = 0; k < nall && st == HR_OK; k++) st = hr_elem_subdivide(s, all[k]);
+  free(all);
+  if (st == HR_OK) hr_elem_open(s, nel0, s->nel);
+  if (st != HR_OK) st = hr_err_set(err, st, "refinement exceeds a limit or is out of memory");
+  return hr_dist_agree(s, st, err);
+}
+
+/* The first decisions of a refinement pass (dec[i] for every link) from the current state;
+ * returns how many links split. */
+static int64_t decide_all(hr_solver *s, double bf_e, uint8_t *dec, float *bup) {
   int64_t nsplit0 = 0, lo = 0;
   if (s->sorted) {
     /* The sorted links, receiver by receiver, from the compact source and oracle arrays (8
      * bytes a link instead of the 32 of its record) and an upper bound of the oracle's errors;
      * only a link whose bound passes BF_e gets the exact test. */
-    float *bup = malloc((size_t)s->nel * sizeof *bup);
-    if (!bup) {
-      free(dec);
-      return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
-    }
     /* Largest channel of B per element, or its leaves' spread if larger, rounded up to float: a
      * small array that stays in cache while the pass reads the sources at random. */
     for (int64_t e = 0; e < s->nel; e++) {
@@ -441,7 +502,6 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
         nsplit0 += dec[k] != KEEP;
       }
     }
-    free(bup);
     lo = s->nsorted;
   }
 #pragma omp parallel for schedule(static) reduction(+ : nsplit0) if (s->nlinks - lo > PAR_MIN)
@@ -449,7 +509,32 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     dec[i] = decide(s, &s->links[i], bf_e);
     nsplit0 += dec[i] != KEEP;
   }
-  if (nsplit0 == 0) {
+  return nsplit0;
+}
+
+hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
+  *nnew = 0;
+  /* Most iterations split nothing: decide for every link first, without copying the graph. */
+  uint8_t *dec = malloc((size_t)(s->nlinks > 0 ? s->nlinks : 1));
+  float *bup = malloc((size_t)(s->nel > 0 ? s->nel : 1) * sizeof *bup);
+  hr_status st = dec && bup ? HR_OK : HR_ERR_NOMEM;
+  int64_t nsplit0 = st == HR_OK ? decide_all(s, bf_e, dec, bup) : 0;
+  free(bup);
+  if (hr_test_fail(s, HR_PHASE_REFINE)) {
+    free(dec);
+    dec = NULL;
+    st = HR_ERR_NOMEM;
+  }
+  /* distributed: whether any rank splits (every rank then takes part in every round) */
+  int64_t any[2] = {st != HR_OK, nsplit0};
+  hr_dist_sum_i64(s->dist, any, 2);
+  if (any[0]) {
+    free(dec);
+    return st != HR_OK ? hr_err_set(err, st, "out of memory during refinement%s",
+                                     dec ? "" : " (or injected by HRAD_TEST_FAIL)")
+                       : hr_err_set(err, HR_ERR_REMOTE, "stopped: another rank failed");
+  }
+  if (any[1] == 0) {
     free(dec);
     return HR_OK;
   }
@@ -457,16 +542,12 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
    * place and append the results; the graph is compacted and fully sorted once dead and extra
    * links make up a quarter of it. */
   int incremental = s->sorted && nsplit0 * 16 < s->nlinks;
-  hr_link *cur, *keep = NULL, *next = NULL;
-  int64_t ncur;
+  hr_link *cur = NULL, *keep = NULL, *next = NULL;
+  int64_t ncur = 0;
   if (incremental) {
-    cur = malloc((size_t)nsplit0 * sizeof *cur);
-    if (!cur) {
-      free(dec);
-      return hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
-    }
-    ncur = 0;
-    for (int64_t i = 0; i < s->nlinks; i++) {
+    cur = malloc((size_t)(nsplit0 > 0 ? nsplit0 : 1) * sizeof *cur);
+    if (!cur) st = HR_ERR_NOMEM;
+    for (int64_t i = 0; cur && i < s->nlinks; i++) {
       if (dec[i] == KEEP) continue;
       hr_link *l = &s->links[i];
       dec[ncur] = dec[i]; /* ncur <= i */
@@ -487,114 +568,131 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
   int64_t *slot = NULL;
   uint8_t *mark = NULL;
   int64_t capmark = 0;
-  hr_status st = HR_OK;
   int64_t rays = 0;
-  /* dec[0, ncur) holds the decisions of the first round already. */
-  for (int round = 0; ncur > 0; round++) {
-    if (round > 0) {
-      uint8_t *d2 = realloc(dec, (size_t)ncur);
-      if (!d2) goto nomem;
-      dec = d2;
-#pragma omp parallel for schedule(static) if (ncur > PAR_MIN)
-      for (int64_t i = 0; i < ncur; i++) dec[i] = decide(s, &cur[i], bf_e);
-    }
-    int64_t *sl2 = realloc(slot, (size_t)ncur * sizeof *slot);
-    if (!sl2) goto nomem;
-    slot = sl2;
-    if ((st = build_lists(s, cur, ncur, dec)) != HR_OK) goto fail;
-    /* Subdivide the marked elements in link order (deterministic element indices). */
-    if (capmark < s->nel) {
-      uint8_t *m = realloc(mark, (size_t)s->nel);
-      if (!m) goto nomem;
-      mark = m;
-      capmark = s->nel;
-    }
-    memset(mark, 0, (size_t)s->nel);
-    const int64_t nel0 = s->nel;
+  /* dec[0, ncur) holds the decisions of the first round already. A local failure is carried to
+   * the round's next collective, where every rank learns of it and all stop together. */
+  for (int round = 0;; round++) {
     int64_t nsplit = 0, nchild_cand = 0, nk = 0;
-    for (int64_t i = 0; i < ncur; i++) {
-      if (dec[i] == KEEP) {
-        slot[i] = nk++;
-        continue;
+    if (st == HR_OK && round > 0) {
+      uint8_t *d2 = realloc(dec, (size_t)(ncur > 0 ? ncur : 1));
+      if (d2) {
+        dec = d2;
+#pragma omp parallel for schedule(static) if (ncur > PAR_MIN)
+        for (int64_t i = 0; i < ncur; i++) dec[i] = decide(s, &cur[i], bf_e);
+      } else {
+        st = HR_ERR_NOMEM;
       }
-      int32_t e = dec[i] == SPLIT_R ? cur[i].r : cur[i].s;
-      if (!mark[e]) {
-        mark[e] = 1;
-        if ((st = hr_elem_subdivide(s, e)) != HR_OK) goto fail;
-      }
-      slot[i] = nsplit++;
-      nchild_cand += 4 * (int64_t)cur[i].ncand;
     }
-    hr_elem_open(s, nel0, s->nel);
+    if (st == HR_OK) {
+      int64_t *sl2 = realloc(slot, (size_t)(ncur > 0 ? ncur : 1) * sizeof *slot);
+      if (sl2) slot = sl2;
+      else st = HR_ERR_NOMEM;
+    }
+    if (st == HR_OK) st = build_lists(s, cur, ncur, dec);
+    if (st == HR_OK && capmark < s->nel) {
+      uint8_t *m = realloc(mark, (size_t)s->nel);
+      if (m) mark = m, capmark = s->nel;
+      else st = HR_ERR_NOMEM;
+    }
+    if (st == HR_OK) {
+      memset(mark, 0, (size_t)s->nel);
+      for (int64_t i = 0; i < ncur; i++) {
+        if (dec[i] == KEEP) {
+          slot[i] = nk++;
+          continue;
+        }
+        mark[dec[i] == SPLIT_R ? cur[i].r : cur[i].s] = 1;
+        slot[i] = nsplit++;
+        nchild_cand += 4 * (int64_t)cur[i].ncand;
+      }
+    }
+    if (st != HR_OK) st = hr_err_set(err, st, "refinement exceeds a limit or is out of memory");
+    if ((st = hr_dist_agree(s, st, err)) != HR_OK) goto fail;
+    if ((st = split_marked(s, mark, s->nel, err)) != HR_OK) goto fail;
     /* Keep: append in order. */
     if (nkeep + nk > capkeep) {
       int64_t nc = capkeep ? capkeep : 1024;
       while (nc < nkeep + nk) nc *= 2;
       hr_link *k2 = realloc(keep, (size_t)nc * sizeof *k2);
-      if (!k2) goto nomem;
-      keep = k2;
-      capkeep = nc;
+      if (k2) keep = k2, capkeep = nc;
+      else st = HR_ERR_NOMEM;
     }
+    if (st == HR_OK) {
 #pragma omp parallel for schedule(static) if (ncur > PAR_MIN)
-    for (int64_t i = 0; i < ncur; i++)
-      if (dec[i] == KEEP) keep[nkeep + slot[i]] = cur[i];
-    nkeep += nk;
-    if (nsplit == 0) break;
-    /* Children: 4 per split link, candidate capacity = parent's count each. */
-    next = malloc((size_t)(4 * nsplit) * sizeof *next);
-    int64_t pool0 = s->npool;
-    if (pool0 + nchild_cand > POOL_MAX) {
-      st = HR_ERR_TOO_BIG;
+      for (int64_t i = 0; i < ncur; i++)
+        if (dec[i] == KEEP) keep[nkeep + slot[i]] = cur[i];
+      nkeep += nk;
+    }
+    int64_t more[2] = {st != HR_OK, nsplit};
+    hr_dist_sum_i64(s->dist, more, 2);
+    if (more[0]) {
+      st = st != HR_OK ? hr_err_set(err, st, "out of memory during refinement")
+                       : hr_err_set(err, HR_ERR_REMOTE, "stopped: another rank failed");
       goto fail;
     }
-    if (!next || !pool_reserve(&s->pool, &s->cap_pool, pool0 + nchild_cand)) goto nomem;
-    /* Offsets of each split link's candidate area: prefix sum in link order. */
-    int64_t *coff = malloc((size_t)nsplit * sizeof *coff);
-    if (!coff) goto nomem;
-    {
+    if (more[1] == 0) break;
+    /* Children: 4 per split link, candidate capacity = parent's count each. */
+    next = malloc((size_t)(4 * nsplit > 0 ? 4 * nsplit : 1) * sizeof *next);
+    int64_t pool0 = s->npool;
+    int64_t *coff = malloc((size_t)(nsplit > 0 ? nsplit : 1) * sizeof *coff);
+    if (pool0 + nchild_cand > POOL_MAX) st = HR_ERR_TOO_BIG;
+    else if (!next || !coff || !pool_reserve(&s->pool, &s->cap_pool, pool0 + nchild_cand))
+      st = HR_ERR_NOMEM;
+    if (st == HR_OK) {
+      /* Offsets of each split link's candidate area: prefix sum in link order. */
       int64_t acc = pool0;
       for (int64_t i = 0; i < ncur; i++)
         if (dec[i] != KEEP) {
           coff[slot[i]] = acc;
           acc += 4 * (int64_t)cur[i].ncand;
         }
-    }
 #pragma omp parallel for schedule(dynamic, 64) reduction(+ : rays) if (nsplit > 16)
-    for (int64_t i = 0; i < ncur; i++) {
-      if (dec[i] == KEEP) continue;
-      const hr_link *pl = &cur[i];
-      int32_t parent = dec[i] == SPLIT_R ? pl->r : pl->s;
-      int32_t first = s->el[parent].child;
-      for (int k = 0; k < 4; k++) {
-        hr_link *cl = &next[4 * slot[i] + k];
-        cl->r = dec[i] == SPLIT_R ? first + k : pl->r;
-        cl->s = dec[i] == SPLIT_S ? first + k : pl->s;
-        int64_t off = coff[slot[i]] + (int64_t)k * pl->ncand;
-        cl->cand_off = (uint32_t)off;
-        hr_vec3 pa[4], pb[4];
-        int na = elem_poly(s, &s->el[cl->r], pa), nb = elem_poly(s, &s->el[cl->s], pb);
-        /* Children shrink the parent's list to their own shaft. Always worth it (measured):
-         * an emptied list means H = 1 with no rays. */
-        cl->ncand = pl->ncand == 0 ? 0
-                                   : hr_shaft_filter(s->scene, pa, na, s->el[cl->r].surf, pb, nb,
-                                                     s->el[cl->s].surf, s->pool + pl->cand_off,
-                                                     pl->ncand, s->pool + off);
-        link_eval(s, s->pool, cl, &rays);
+      for (int64_t i = 0; i < ncur; i++) {
+        if (dec[i] == KEEP) continue;
+        const hr_link *pl = &cur[i];
+        int32_t parent = dec[i] == SPLIT_R ? pl->r : pl->s;
+        int32_t first = s->el[parent].child;
+        for (int k = 0; k < 4; k++) {
+          hr_link *cl = &next[4 * slot[i] + k];
+          cl->r = dec[i] == SPLIT_R ? first + k : pl->r;
+          cl->s = dec[i] == SPLIT_S ? first + k : pl->s;
+          int64_t off = coff[slot[i]] + (int64_t)k * pl->ncand;
+          cl->cand_off = (uint32_t)off;
+          hr_vec3 pa[4], pb[4];
+          int na = elem_poly(s, &s->el[cl->r], pa), nb = elem_poly(s, &s->el[cl->s], pb);
+          /* Children shrink the parent's list to their own shaft. Always worth it (measured):
+           * an emptied list means H = 1 with no rays. */
+          cl->ncand = pl->ncand == 0
+                          ? 0
+                          : hr_shaft_filter(s->scene, pa, na, s->el[cl->r].surf, pb, nb,
+                                            s->el[cl->s].surf, s->pool + pl->cand_off, pl->ncand,
+                                            s->pool + off);
+          link_eval(s, s->pool, cl, &rays);
+        }
       }
+      s->npool = pool0 + nchild_cand;
+      *nnew += 4 * nsplit;
+      free(cur);
+      cur = next;
+      next = NULL;
+      ncur = 4 * nsplit;
+    } else {
+      /* the next round's first collective tells the others */
+      st = hr_err_set(err, st, "refinement exceeds a limit or is out of memory");
+      free(next);
+      next = NULL;
+      ncur = 0;
     }
     free(coff);
-    s->npool = pool0 + nchild_cand;
-    *nnew += 4 * nsplit;
-    free(cur);
-    cur = next;
-    next = NULL;
-    ncur = 4 * nsplit;
   }
   free(cur);
   cur = NULL;
   s->rays += rays;
   if (incremental) {
-    if (!links_reserve(s, s->nlinks + nkeep)) goto nomem;
+    if (!links_reserve(s, s->nlinks + nkeep)) {
+      st = HR_ERR_NOMEM;
+      goto fail;
+    }
     memcpy(s->links + s->nlinks, keep, (size_t)nkeep * sizeof *keep);
     s->nlinks += nkeep;
     free(keep);
@@ -610,9 +708,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
   free(dec);
   free(slot);
   free(mark);
-  return st;
-nomem:
-  st = HR_ERR_NOMEM;
+  return HR_OK;
 fail:
   free(dec);
   free(slot);
@@ -620,6 +716,7 @@ fail:
   free(next);
   free(cur);
   free(keep);
+  if (st == HR_ERR_REMOTE) return st;
   if (st == HR_ERR_TOO_BIG)
     return hr_err_set(err, st,
                       "refinement exceeds a limit: more than 2^31 elements or 2^32 candidate "

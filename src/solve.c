@@ -6,11 +6,13 @@
  * Iteration is Jacobi-style: every gather reads the radiosities of the previous push-pull, and
  * sums over a receiver's links in a fixed order, so results do not depend on thread count or
  * scheduling. */
+#include "mpi/dist.h"
 #include "solver_impl.h"
 #include "vec.h"
 
 #include <math.h>
 #include <omp.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <sys/resource.h>
@@ -137,6 +139,7 @@ void hr_solver_destroy(hr_solver **ps) {
   free(s->xidx);
   free(s->ls);
   free(s->lfo);
+  free(s->owner);
   free(s);
   *ps = NULL;
 }
@@ -258,11 +261,127 @@ static double push_pull_all(hr_solver *s) {
   int n = s->scene->nsurfs;
 #pragma omp parallel for schedule(dynamic, 8) reduction(max : maxc) if (s->nel > PAR_MIN)
   for (int i = 0; i < n; i++) {
+    if (!hr_owns(s, i)) continue;
     double zero[5] = {0, 0, 0, 0, 0}, b[3], range[2];
     double d = pushpull(s, i, zero, b, range);
     maxc = d > maxc ? d : maxc;
   }
   return maxc;
+}
+
+/* Distributed runs: what every rank needs of every element after push-pull (the owners'
+ * B, Bs, bref and bvar: refinement reads them at sources, gathering reads Bs, outputs read B)
+ * and the largest change, shared by a sum in which the other ranks add exact zeros; so every
+ * rank holds the same values bit for bit. */
+#define SYNC_W 8
+static hr_status sync_state(hr_solver *s, double *change, hr_err *err) {
+  if (!s->dist) return HR_OK;
+  double *buf = malloc((size_t)(s->nel * SYNC_W + 1) * sizeof *buf);
+  hr_status st = buf ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  if (hr_test_fail(s, HR_PHASE_PUSHPULL))
+    st = hr_err_set(err, HR_ERR_NOMEM, "out of memory (injected by HRAD_TEST_FAIL)");
+  st = hr_dist_agree(s, st, err);
+  if (st != HR_OK) {
+    free(buf);
+    return st;
+  }
+#pragma omp parallel for schedule(static) if (s->nel > PAR_MIN)
+  for (int64_t e = 0; e < s->nel; e++) {
+    double *b = buf + e * SYNC_W;
+    if (!hr_owns(s, s->el[e].surf)) {
+      memset(b, 0, SYNC_W * sizeof *b);
+      continue;
+    }
+    memcpy(b, s->B[e], 3 * sizeof *b);
+    memcpy(b + 3, s->Bs[e], 3 * sizeof *b);
+    b[6] = s->bref[e];
+    b[7] = s->bvar[e];
+  }
+  hr_dist_sum_f64(s->dist, buf, s->nel * SYNC_W);
+#pragma omp parallel for schedule(static) if (s->nel > PAR_MIN)
+  for (int64_t e = 0; e < s->nel; e++) {
+    const double *b = buf + e * SYNC_W;
+    memcpy(s->B[e], b, 3 * sizeof *b);
+    memcpy(s->Bs[e], b + 3, 3 * sizeof *b);
+    s->bref[e] = b[6];
+    s->bvar[e] = b[7];
+  }
+  free(buf);
+  hr_dist_max_f64(s->dist, change, 1);
+  return HR_OK;
+}
+
+/* The counts reported (links, rays) over all ranks. */
+static void sync_counts(hr_solver *s) {
+  int64_t v[3] = {s->nlinks - s->ndead, s->rays, s->initial_links};
+  hr_dist_sum_i64(s->dist, v, 3);
+  s->g_links = v[0], s->g_rays = v[1], s->g_initial = v[2];
+}
+
+hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err) {
+  if (!s->dist) return st;
+  int64_t bad = st != HR_OK;
+  hr_dist_max_i64(s->dist, &bad, 1);
+  if (bad && st == HR_OK)
+    return hr_err_set(err, HR_ERR_REMOTE, "stopped: another rank failed");
+  return st;
+}
+
+hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, hr_err *err) {
+  if (s->started) return hr_err_set(err, HR_ERR_INVALID, "hr_solver_set_dist: solver has run");
+  const int P = hr_dist_size(d), n = s->scene->nsurfs;
+  if (!d || P == 1) return HR_OK; /* one process: nothing to spread */
+  int32_t *o = malloc((size_t)n * sizeof *o);
+  if (!o) return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  if (owner) {
+    for (int i = 0; i < n; i++)
+      if (owner[i] < 0 || owner[i] >= P) {
+        free(o);
+        return hr_err_set(err, HR_ERR_INVALID, "surface %d: owner %d is not a rank (0..%d)", i,
+                          owner[i], P - 1);
+      }
+    memcpy(o, owner, (size_t)n * sizeof *o);
+  } else {
+    /* by area, largest first (ties by index), each to the rank with the least so far: the
+     * work of a surface's tree grows with its area over A_e */
+    int32_t *ord = malloc((size_t)n * sizeof *ord);
+    double *load = calloc((size_t)P, sizeof *load);
+    if (!ord || !load) {
+      free(o);
+      free(ord);
+      free(load);
+      return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+    }
+    for (int i = 0; i < n; i++) ord[i] = i;
+    for (int i = 1; i < n; i++) { /* insertion sort: surfaces are few here (< 1e4) */
+      int32_t t = ord[i];
+      int j = i;
+      for (; j > 0 && s->scene->surfs[ord[j - 1]].area < s->scene->surfs[t].area; j--)
+        ord[j] = ord[j - 1];
+      ord[j] = t;
+    }
+    for (int i = 0; i < n; i++) {
+      int best = 0;
+      for (int p = 1; p < P; p++) best = load[p] < load[best] ? p : best;
+      o[ord[i]] = best;
+      load[best] += s->scene->surfs[ord[i]].area;
+    }
+    free(ord);
+    free(load);
+  }
+  free(s->owner);
+  s->owner = o;
+  s->dist = d;
+  s->rank = hr_dist_rank(d);
+  const char *tf = getenv("HRAD_TEST_FAIL");
+  if (tf) {
+    static const char *const names[] = {"", "init", "refine", "push-pull"};
+    char ph[16] = "";
+    if (sscanf(tf, "%d:%15[a-z-]:%d", &s->fail_rank, ph, &s->fail_iter) >= 2)
+      for (int k = 1; k < 4; k++)
+        if (!strcmp(ph, names[k])) s->fail_phase = k;
+  }
+  return HR_OK;
 }
 
 /* The guard against a wrong answer: every leaf's radiosity must be finite and at most
@@ -367,11 +486,16 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
   double ta = hr_now();
   *nnew = 0;
   if (s->iterations > 0 && (st = hr_link_refine(s, s->bf_e, nnew, err)) != HR_OK) return st;
-  if ((st = hr_link_sort(s)) != HR_OK) return hr_err_set(err, st, "out of memory");
+  st = hr_link_sort(s);
+  if ((st = hr_dist_agree(s, st == HR_OK ? st : hr_err_set(err, st, "out of memory"), err)))
+    return st;
+  hr_dist_sum_i64(s->dist, nnew, 1);
   double tb = hr_now();
   gather(s);
   double tc = hr_now();
-  const double abs = push_pull_all(s);
+  double abs = push_pull_all(s);
+  if ((st = sync_state(s, &abs, err)) != HR_OK) return st;
+  sync_counts(s);
   *change = abs / s->unit;
   if ((st = check_physical(s, err)) != HR_OK) return st;
   if ((st = check_contracting(s, abs, *nnew, err)) != HR_OK) return st;
@@ -408,7 +532,7 @@ static void advance(hr_solver *s, double change, int64_t nnew, int stop) {
     /* Section 2.2.4: at an intermediate level, a change below B_max counts as approximately
      * converged once the links settle, or at once while many new links still appear (the next,
      * lower BF_e will refine them anyway). */
-    int many = (double)nnew * 100.0 >= (double)o->relax_links * (double)s->nlinks;
+    int many = (double)nnew * 100.0 >= (double)o->relax_links * (double)s->g_links;
     level_done = change < o->b_max && (nnew == 0 || many);
   }
   if (level_done && at_low) { /* at BF_low only strict convergence ends a level */
@@ -435,6 +559,7 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     const double t0 = hr_now();
     hr_elem_open(s, 0, s->nel);
     if ((st = hr_link_init(s, err)) != HR_OK) return st;
+    sync_counts(s);
     s->t.init_graph = hr_now() - t0;
     s->bf_e = s->opt.bf_start;
     s->converged = 0;
@@ -450,9 +575,10 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     /* Display ({15}) and checkpoints: the state is complete here, and s->bf_e is already the
      * next iteration's. */
     if (cb) {
-      hr_iter_info info = {s->iterations, bf_e, count_leaves(s), s->nlinks - s->ndead, change,
-                           s->t.total};
-      if (cb(ud, s, &info) && !s->done) {
+      hr_iter_info info = {s->iterations, bf_e, count_leaves(s), s->g_links, change, s->t.total};
+      int64_t stop = cb(ud, s, &info) != 0;
+      hr_dist_max_i64(s->dist, &stop, 1); /* every rank stops after the same iteration */
+      if (stop && !s->done) {
         s->done = 1;
         s->stopped = 1;
       }
@@ -468,10 +594,10 @@ void hr_solver_stats(const hr_solver *s, hr_stats *st) {
   st->npolys = s->scene->npolys;
   st->elements = count_leaves(s);
   st->elements_all = s->nel;
-  st->links = s->nlinks - s->ndead;
-  st->initial_links = s->initial_links;
+  st->links = s->dist ? s->g_links : s->nlinks - s->ndead;
+  st->initial_links = s->dist ? s->g_initial : s->initial_links;
   st->iterations = s->iterations;
-  st->rays = s->rays;
+  st->rays = s->dist ? s->g_rays : s->rays;
   st->converged = s->converged;
   st->threads = s->threads;
   struct rusage ru;

@@ -113,7 +113,32 @@ struct hr_solver {
   int iterations, converged, threads;
   hr_timing t;
   double t_start;
+  /* Distribution (docs/design.md, "Distribution"): NULL in one process. A rank holds every
+   * element (the same arrays, in the same order, on every rank) but only the links whose
+   * receiver lies in a surface it owns; after push-pull the owners' radiosities are shared. */
+  hr_dist *dist;
+  int32_t *owner;     /* per surface: the rank that owns its tree */
+  int rank;
+  int64_t g_links, g_rays, g_initial; /* over all ranks (= the local counts in one process) */
+  /* Test hook (HRAD_TEST_FAIL=RANK:PHASE:ITER, read by hr_solver_set_dist): rank 'fail_rank'
+   * fails with "out of memory" in phase fail_phase (HR_PHASE_*) of iteration fail_iter. */
+  int fail_rank, fail_phase, fail_iter;
 };
+
+enum { HR_PHASE_NONE, HR_PHASE_INIT, HR_PHASE_REFINE, HR_PHASE_PUSHPULL };
+/* 1 if the test hook makes this rank fail now, in 'phase'. */
+static inline int hr_test_fail(const hr_solver *s, int phase) {
+  return s->fail_phase == phase && s->rank == s->fail_rank &&
+         (phase == HR_PHASE_INIT || s->iterations + 1 == s->fail_iter);
+}
+
+/* 1 if this rank owns surface 'surf' (always in one process). */
+static inline int hr_owns(const hr_solver *s, int32_t surf) {
+  return !s->owner || s->owner[surf] == s->rank;
+}
+/* Makes every rank see a failure of any: returns 'st' where this rank failed, HR_ERR_REMOTE
+ * (with a message) where another did, HR_OK where none did. A collective in distributed runs. */
+hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err);
 
 /* elem.c */
 hr_status hr_elem_init(hr_solver *s);                  /* one root per surface, idx == surface */

@@ -73,6 +73,8 @@ typedef struct names {
 
 typedef struct cli {
   hr_options opt;
+  int balance_random;     /* --balance random:SEED (tests: any assignment gives the same answer) */
+  uint64_t balance_seed;
   const char *scene_arg;
   const char *outdir; /* -o as given */
   int quiet;
@@ -113,6 +115,23 @@ typedef struct cli {
 static cli *g_cli;                /* for cleanup on errors and signals */
 static pthread_mutex_t g_lock;    /* recursive; held while the staging directory changes */
 static atomic_int g_stop;         /* the first signal received, 0 if none */
+/* MPI (README "Many processes"): NULL in a plain run. Rank 0 prints and writes; the others
+ * solve beside it. g_together: every rank runs the same code here (parsing, loading, solving),
+ * so an error there is met by all of them at once and they can leave MPI in order; an error in
+ * rank 0's own work (outputs) ends it alone, and mpirun then ends the others. */
+static hr_dist *g_dist;
+static int g_rank, g_together = 1;
+
+/* Leaves MPI (if in it) and exits. */
+static void leave(int code)
+#if defined(__GNUC__)
+    __attribute__((noreturn))
+#endif
+    ;
+static void leave(int code) {
+  if (g_together) hr_dist_finish(&g_dist);
+  exit(code);
+}
 static sigset_t g_sigs;           /* the signals the signal thread takes */
 
 static void lock(void) { pthread_mutex_lock(&g_lock); }
@@ -127,11 +146,13 @@ static void die_usage(const char *fmt, ...)
 static void die_usage(const char *fmt, ...) {
   va_list ap;
   va_start(ap, fmt);
-  fprintf(stderr, "hrad: ");
-  vfprintf(stderr, fmt, ap);
-  fprintf(stderr, "\nTry 'hrad --help'.\n");
+  if (g_rank == 0) {
+    fprintf(stderr, "hrad: ");
+    vfprintf(stderr, fmt, ap);
+    fprintf(stderr, "\nTry 'hrad --help'.\n");
+  }
   va_end(ap);
-  exit(2);
+  leave(2);
 }
 
 /* ---------------------------------------------------------------- staging and cleanup */
@@ -199,13 +220,26 @@ static void fail(const char *fmt, ...) {
     }
   }
   if (k < sizeof out) snprintf(out + k, sizeof out - k, "%s", p);
-  fprintf(stderr, "hrad: %s\n", out);
+  if (g_rank == 0 || !g_together) fprintf(stderr, "hrad: %s\n", out);
   remove_stage(c);
-  exit(1);
+  leave(1);
 }
 
+/* Fails on an error status. With MPI, every rank meets the errors of the common work together:
+ * rank 0 reports them, except that a rank that failed alone (out of memory) reports its own and
+ * the others (HR_ERR_REMOTE) stay silent. */
 static void check(hr_status st, const hr_err *err) {
-  if (st != HR_OK) fail("%s", err->msg);
+  if (st == HR_OK) return;
+  if (st == HR_ERR_REMOTE && g_dist) {
+    remove_stage(g_cli);
+    leave(1);
+  }
+  if (g_dist && st == HR_ERR_NOMEM) { /* this rank alone */
+    fprintf(stderr, "hrad: rank %d: %s\n", g_rank, err->msg);
+    remove_stage(g_cli);
+    leave(1);
+  }
+  fail("%s", err->msg);
 }
 
 static void *xrealloc(void *p, size_t n) {
@@ -376,7 +410,8 @@ static void *sig_thread(void *arg) {
     if (sigwait(&g_sigs, &sig) != 0) continue;
     if (n == 0) {
       atomic_store(&g_stop, sig);
-      fprintf(stderr,
+      if (g_rank == 0) /* mpirun passes a signal to every rank: one line */
+        fprintf(stderr,
               "hrad: interrupted by %s: stopping without writing outputs (once more to stop at "
               "once)\n",
               sig_name(sig));
@@ -458,6 +493,10 @@ static void usage(void) {
       "                       (--threads may differ); the result is the one an uninterrupted\n"
       "                       run gives, bit for bit. From a finished run's checkpoint only the\n"
       "                       outputs are written (e.g. other --camera or --size)\n"
+      "\n"
+      "Many processes (mpirun -np P hrad ..., README 'Many processes'):\n"
+      "  --balance area       surfaces to ranks by area, largest first (default)\n"
+      "  --balance random:N   surfaces to ranks at random (seed N): the answer is the same\n"
       "\n"
       "Checking (an independent Monte Carlo path tracer, README 'Checking the light'):\n"
       "  --verify N           after solving, estimate every polygon with N paths, print a\n"
@@ -715,6 +754,11 @@ static void parse_args(cli *c, int argc, char **argv) {
     } else if (!strcmp(a, "--resume")) {
       c->resume = NEXT();
       if (!*c->resume) die_usage("--resume: empty file name");
+    } else if (!strcmp(a, "--balance")) {
+      const char *v = NEXT();
+      if (!strcmp(v, "area")) c->balance_random = 0;
+      else if (!strncmp(v, "random:", 7)) c->balance_random = 1, c->balance_seed = parse_seed(v + 7);
+      else die_usage("--balance must be 'area' or 'random:SEED', got '%s'", v);
     } else if (!strcmp(a, "--camera")) parse_camera(c, NEXT());
     else if (!strcmp(a, "--emit")) parse_emit(c, NEXT());
     else if (!strcmp(a, "--size")) parse_size(c, NEXT());
@@ -722,6 +766,8 @@ static void parse_args(cli *c, int argc, char **argv) {
 #undef NEXT
   }
   if (!c->scene_arg) c->scene_arg = "room";
+  if (hr_dist_size(g_dist) > 1 && (c->ckpt || c->resume))
+    die_usage("--checkpoint and --resume do not work with more than one MPI rank yet");
   check_ckpt_paths(c);
   /* the checks of hr_solver_create that relate two options, with its messages */
   if (!(o->bf_start >= o->bf_low))
@@ -1450,11 +1496,24 @@ int main(int argc, char **argv) {
   pthread_mutexattr_init(&ma);
   pthread_mutexattr_settype(&ma, PTHREAD_MUTEX_RECURSIVE);
   pthread_mutex_init(&g_lock, &ma);
+  {
+    hr_err derr = {{0}};
+    if (hr_dist_start(&argc, &argv, &g_dist, &derr) != HR_OK) {
+      fprintf(stderr, "hrad: %s\n", derr.msg);
+      return 1;
+    }
+    g_rank = hr_dist_rank(g_dist);
+  }
   parse_args(&c, argc, argv);
+  if (g_rank != 0) c.quiet = 1, c.snapshots = 0; /* rank 0 prints and writes */
   start_signals();
-  prepare_outdir(&c);
-  c.viewer = three_available();
-  if (!c.viewer)
+  if (g_rank == 0) {
+    g_together = 0;
+    prepare_outdir(&c);
+    g_together = 1;
+  }
+  c.viewer = g_rank == 0 && three_available();
+  if (!c.viewer && g_rank == 0)
     fprintf(stderr,
             "hrad: warning: %s: three.js not found, so no viewer.html (run scripts/setup.sh, or "
             "set HRAD_THREE_DIR)\n",
@@ -1492,6 +1551,22 @@ int main(int argc, char **argv) {
   else hr_scene_auto_camera(scene, &c.cam);
   hr_solver *s = NULL;
   check(hr_solver_create(scene, &c.opt, &s, &err), &err);
+  if (hr_dist_size(g_dist) > 1) {
+    int32_t *owner = NULL;
+    if (c.balance_random) {
+      const int P = hr_dist_size(g_dist);
+      owner = xrealloc(NULL, (size_t)scene->nsurfs * sizeof *owner);
+      uint64_t x = c.balance_seed;
+      for (int i = 0; i < scene->nsurfs; i++) { /* splitmix64 */
+        uint64_t z = (x += UINT64_C(0x9e3779b97f4a7c15));
+        z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
+        z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
+        owner[i] = (int32_t)((z ^ (z >> 31)) % (uint64_t)P);
+      }
+    }
+    check(hr_solver_set_dist(s, g_dist, owner, &err), &err);
+    free(owner);
+  }
   if (c.resume) {
     check(hr_solver_resume(s, c.resume, &err), &err);
     if (!c.quiet) {
@@ -1512,6 +1587,13 @@ int main(int argc, char **argv) {
   }
   c.ckpt_last = now_s();
   st = hr_solver_run(s, on_iter, &c, &err);
+  if (g_rank != 0) { /* its part is done: rank 0 writes the outputs */
+    if (st != HR_OK) check(st, &err);
+    hr_solver_destroy(&s);
+    hr_scene_destroy(&scene);
+    leave(atomic_load(&g_stop) ? 128 + atomic_load(&g_stop) : 0);
+  }
+  g_together = 0;
   check_stop(&c);
   check(st, &err);
   if (c.ckpt) {
@@ -1551,5 +1633,6 @@ int main(int argc, char **argv) {
   names_free(&c.outs);
   hr_solver_destroy(&s);
   hr_scene_destroy(&scene);
-  return 0;
+  g_together = 1;
+  leave(0);
 }

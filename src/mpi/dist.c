@@ -1,0 +1,186 @@
+/* dist.c: the solver's only contact with MPI (the one file that includes mpi.h). The solver
+ * calls the few collectives of dist.h at fixed points of an iteration (docs/design.md,
+ * "Distribution"); in one process the handle is NULL and every call is a no-op, so the
+ * one-process path makes no MPI call at all.
+ *
+ * MPI is started only when this process was launched by an MPI launcher (its environment says
+ * so): plain `hrad SCENE` never initialises MPI, which costs about 0.35 s and refuses to run as
+ * root without extra settings. Counts above INT_MAX travel in chunks. */
+#include "mpi/dist.h"
+
+#include <mpi.h>
+#include <limits.h>
+#include <stdlib.h>
+#include <string.h>
+
+struct hr_dist {
+  MPI_Comm comm;
+  int rank, size;
+  int own_init; /* MPI_Init was ours: finalize it */
+};
+
+/* Elements per collective call: well below INT_MAX, in any MPI type used here. */
+#define CHUNK (INT64_C(1) << 26)
+
+/* Environment variables by which Open MPI, MPICH (Hydra) and PMIx launchers mark their
+ * processes. */
+static int launched_by_mpi(void) {
+  static const char *const vars[] = {"OMPI_COMM_WORLD_SIZE", "PMIX_RANK", "PMI_SIZE",
+                                     "PMI_RANK", "MPI_LOCALNRANKS"};
+  for (size_t i = 0; i < sizeof vars / sizeof vars[0]; i++)
+    if (getenv(vars[i])) return 1;
+  return 0;
+}
+
+hr_status hr_dist_start(int *argc, char ***argv, hr_dist **out, hr_err *err) {
+  *out = NULL;
+  if (!launched_by_mpi()) return HR_OK;
+  int inited = 0, provided = 0;
+  MPI_Initialized(&inited);
+  if (!inited && MPI_Init_thread(argc, argv, MPI_THREAD_FUNNELED, &provided) != MPI_SUCCESS)
+    return hr_err_set(err, HR_ERR_IO, "MPI_Init failed");
+  hr_dist *d = calloc(1, sizeof *d);
+  if (!d) {
+    if (!inited) MPI_Finalize();
+    return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  }
+  d->own_init = !inited;
+  MPI_Comm_dup(MPI_COMM_WORLD, &d->comm);
+  MPI_Comm_rank(d->comm, &d->rank);
+  MPI_Comm_size(d->comm, &d->size);
+  *out = d;
+  return HR_OK;
+}
+
+void hr_dist_finish(hr_dist **pd) {
+  if (!pd || !*pd) return;
+  hr_dist *d = *pd;
+  MPI_Comm_free(&d->comm);
+  if (d->own_init) MPI_Finalize();
+  free(d);
+  *pd = NULL;
+}
+
+void hr_dist_abort(const hr_dist *d, int code) {
+  if (d) MPI_Abort(d->comm, code);
+}
+
+int hr_dist_rank(const hr_dist *d) { return d ? d->rank : 0; }
+int hr_dist_size(const hr_dist *d) { return d ? d->size : 1; }
+
+void hr_dist_barrier(const hr_dist *d) {
+  if (d) MPI_Barrier(d->comm);
+}
+
+static void allreduce(const hr_dist *d, void *v, int64_t n, MPI_Datatype t, size_t sz, MPI_Op op) {
+  if (!d || d->size == 1) return;
+  char *p = v;
+  for (int64_t o = 0; o < n; o += CHUNK) {
+    int64_t k = n - o < CHUNK ? n - o : CHUNK;
+    MPI_Allreduce(MPI_IN_PLACE, p + (size_t)o * sz, (int)k, t, op, d->comm);
+  }
+}
+
+void hr_dist_sum_f64(const hr_dist *d, double *v, int64_t n) {
+  allreduce(d, v, n, MPI_DOUBLE, sizeof *v, MPI_SUM);
+}
+void hr_dist_max_f64(const hr_dist *d, double *v, int64_t n) {
+  allreduce(d, v, n, MPI_DOUBLE, sizeof *v, MPI_MAX);
+}
+void hr_dist_sum_i64(const hr_dist *d, int64_t *v, int64_t n) {
+  allreduce(d, v, n, MPI_INT64_T, sizeof *v, MPI_SUM);
+}
+void hr_dist_max_i64(const hr_dist *d, int64_t *v, int64_t n) {
+  allreduce(d, v, n, MPI_INT64_T, sizeof *v, MPI_MAX);
+}
+
+/* Exchanges byte counts, then the bytes, point to point in rounds of at most CHUNK bytes per
+ * pair so that every count fits an int (no int displacements either). */
+hr_status hr_dist_alltoall(const hr_dist *d, const void *send, const int64_t *sbytes,
+                           void **recv, int64_t *rbytes_total, int64_t *rbytes) {
+  const int P = d->size;
+  int64_t *soff = malloc((size_t)P * sizeof *soff), *roff = malloc((size_t)P * sizeof *roff);
+  MPI_Request *rq = malloc((size_t)(2 * P) * sizeof *rq);
+  int64_t bad = !soff || !roff || !rq;
+  char *rb = NULL;
+  if (!bad) MPI_Alltoall(sbytes, 1, MPI_INT64_T, rbytes, 1, MPI_INT64_T, d->comm);
+  int64_t ts = 0, tr = 0, rounds = 0;
+  for (int p = 0; p < P && !bad; p++) {
+    soff[p] = ts, roff[p] = tr;
+    ts += sbytes[p], tr += rbytes[p];
+    int64_t a = (sbytes[p] + CHUNK - 1) / CHUNK, b = (rbytes[p] + CHUNK - 1) / CHUNK;
+    rounds = a > rounds ? a : rounds;
+    rounds = b > rounds ? b : rounds;
+  }
+  if (!bad && !(rb = malloc((size_t)(tr > 0 ? tr : 1)))) bad = 1;
+  int64_t v[2] = {bad, rounds}; /* every rank learns whether any failed, and the rounds */
+  hr_dist_max_i64(d, v, 2);
+  if (v[0]) {
+    free(rb);
+    free(soff);
+    free(roff);
+    free(rq);
+    return HR_ERR_NOMEM;
+  }
+  const char *sbase = send;
+  for (int64_t r = 0; r < v[1]; r++) {
+    int nq = 0;
+    for (int p = 0; p < P; p++) {
+      int64_t b = rbytes[p] - r * CHUNK;
+      if (b > 0)
+        MPI_Irecv(rb + roff[p] + r * CHUNK, (int)(b < CHUNK ? b : CHUNK), MPI_BYTE, p, 7, d->comm,
+                  &rq[nq++]);
+    }
+    for (int p = 0; p < P; p++) {
+      int64_t a = sbytes[p] - r * CHUNK;
+      if (a > 0)
+        MPI_Isend(sbase + soff[p] + r * CHUNK, (int)(a < CHUNK ? a : CHUNK), MPI_BYTE, p, 7,
+                  d->comm, &rq[nq++]);
+    }
+    MPI_Waitall(nq, rq, MPI_STATUSES_IGNORE);
+  }
+  free(soff);
+  free(roff);
+  free(rq);
+  *recv = rb;
+  *rbytes_total = tr;
+  return HR_OK;
+}
+
+static int cmp_i32(const void *a, const void *b) {
+  const int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
+  return (x > y) - (x < y);
+}
+
+hr_status hr_dist_union_i32(const hr_dist *d, const int32_t *mine, int64_t n, int32_t **all,
+                            int64_t *nall) {
+  *all = NULL;
+  *nall = 0;
+  const int P = d->size;
+  int *cnt = malloc((size_t)P * sizeof *cnt), *dsp = malloc((size_t)P * sizeof *dsp);
+  int64_t tot = n, bad = !cnt || !dsp || n > INT_MAX;
+  hr_dist_sum_i64(d, &tot, 1);
+  int32_t *v = NULL;
+  if (!bad && tot <= INT_MAX && !(v = malloc((size_t)(tot > 0 ? tot : 1) * sizeof *v))) bad = 1;
+  if (tot > INT_MAX) bad = 2;
+  hr_dist_max_i64(d, &bad, 1);
+  if (bad) {
+    free(cnt);
+    free(dsp);
+    free(v);
+    return bad == 2 ? HR_ERR_TOO_BIG : HR_ERR_NOMEM;
+  }
+  int ni = (int)n;
+  MPI_Allgather(&ni, 1, MPI_INT, cnt, 1, MPI_INT, d->comm);
+  for (int p = 0, o = 0; p < P; p++) dsp[p] = o, o += cnt[p];
+  MPI_Allgatherv(mine, ni, MPI_INT32_T, v, cnt, dsp, MPI_INT32_T, d->comm);
+  free(cnt);
+  free(dsp);
+  int64_t k = 0;
+  qsort(v, (size_t)tot, sizeof *v, cmp_i32);
+  for (int64_t i = 0; i < tot; i++)
+    if (k == 0 || v[k - 1] != v[i]) v[k++] = v[i];
+  *all = v;
+  *nall = k;
+  return HR_OK;
+}

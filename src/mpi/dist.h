@@ -1,0 +1,30 @@
+/* dist.h: what the solver needs from MPI, without mpi.h (only src/mpi/dist.c includes it).
+ *
+ * A NULL handle is one process: rank 0 of 1, every collective a no-op. All collectives must be
+ * called by every rank in the same order; those that allocate agree on failure across ranks
+ * (every rank gets the same status), so an out-of-memory on one rank cannot leave the others
+ * waiting. The public start/finish/rank/size calls are declared in hrad.h. */
+#ifndef HR_MPI_DIST_H
+#define HR_MPI_DIST_H
+
+#include "hrad.h"
+
+#include <stdint.h>
+
+void hr_dist_barrier(const hr_dist *d);
+/* In-place reductions over all ranks of n values. */
+void hr_dist_sum_f64(const hr_dist *d, double *v, int64_t n);
+void hr_dist_max_f64(const hr_dist *d, double *v, int64_t n);
+void hr_dist_sum_i64(const hr_dist *d, int64_t *v, int64_t n);
+void hr_dist_max_i64(const hr_dist *d, int64_t *v, int64_t n);
+/* Personalised exchange: sbytes[p] bytes of 'send' (consecutive, in rank order) go to rank p;
+ * '*recv' (malloc'd, caller frees) gets what each rank sent here, in rank order, rbytes[p] bytes
+ * from rank p, '*rbytes_total' in all. d must not be NULL. */
+hr_status hr_dist_alltoall(const hr_dist *d, const void *send, const int64_t *sbytes,
+                           void **recv, int64_t *rbytes_total, int64_t *rbytes);
+/* The sorted union without repeats of every rank's 'mine' (n values): '*all' (malloc'd, caller
+ * frees) with '*nall' values. d must not be NULL. */
+hr_status hr_dist_union_i32(const hr_dist *d, const int32_t *mine, int64_t n, int32_t **all,
+                            int64_t *nall);
+
+#endif

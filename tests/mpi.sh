@@ -1,0 +1,87 @@
+#!/usr/bin/env bash
+# The distributed solver under mpirun (README "Many processes"): the same answer, bit for bit, as
+# one process, for P = 1, 2, 3, 4, 7 ranks, 1 or 2 threads per rank and random assignments of the
+# surfaces to ranks (surfaces.csv, the images, the meshes and the counts of stats.json); a rank
+# that fails in any phase (HRAD_TEST_FAIL) ends the whole run with one line, exit status 1, no
+# outputs and no hang; bad input reported once; options not supported yet refused.
+# Runs above 2 ranks are oversubscribed on 2 cores: correctness only, no timing here.
+# Usage: mpi.sh HRAD_BINARY SOURCE_DIR SHARED_DIR
+set -u
+hrad=$1
+if ! command -v mpirun >/dev/null; then
+  echo "SKIP: mpirun not found (scripts/setup.sh installs openmpi-bin)"
+  exit 0
+fi
+export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+t=$(mktemp -d)
+trap 'rm -rf "$t"' EXIT
+fails=0 passes=0
+ok() { passes=$((passes + 1)); echo "ok   $*"; }
+bad() { fails=$((fails + 1)); echo "FAIL $*"; }
+mpi() { local np=$1; shift; timeout 120 mpirun -np "$np" --bind-to none "$hrad" "$@"; }
+# same DIR1 DIR2 SCENE WHAT: outputs and counts identical
+same() {
+  local a=$1 b=$2 sc=$3 what=$4 f d=""
+  for f in surfaces.csv "$sc.png" "$sc-elements.png" "$sc.ply" "$sc.glb"; do
+    cmp -s "$a/$f" "$b/$f" || d="$d $f"
+  done
+  local ca cb
+  ca=$(grep -E '"(elements|elements_all|links|initial_links|iterations|rays|converged)"' "$a/stats.json")
+  cb=$(grep -E '"(elements|elements_all|links|initial_links|iterations|rays|converged)"' "$b/stats.json")
+  [ "$ca" = "$cb" ] || d="$d stats.json-counts"
+  [ -z "$d" ] && ok "$what: identical to one process" || bad "$what: differs in$d"
+}
+
+# ---------------------------------------------------------------- same answer, any P
+q=(--quiet --size 96x72 --bf-low 3e-3)
+"$hrad" "${q[@]}" --threads 2 -o "$t/c1" cornell || bad "plain cornell run failed"
+for np in 1 2 3 4 7; do
+  mpi "$np" "${q[@]}" --threads 1 -o "$t/c$np-mpi" cornell && same "$t/c1" "$t/c$np-mpi" cornell \
+    "cornell, $np ranks x 1 thread" || bad "cornell on $np ranks: exit $?"
+done
+mpi 2 "${q[@]}" --threads 2 -o "$t/c2t2" cornell && same "$t/c1" "$t/c2t2" cornell \
+  "cornell, 2 ranks x 2 threads" || bad "cornell 2x2: exit $?"
+
+# ---------------------------------------------------------------- random assignments
+f=(--quiet --size 64x48 --bf-low 1e-2)
+"$hrad" "${f[@]}" --threads 1 -o "$t/fref" floor || bad "plain floor run failed"
+for seed in 1 2 3 4 5 6 7 8 9 10; do
+  np=$((3 + seed % 5))
+  mpi "$np" "${f[@]}" --threads 1 --balance "random:$seed" -o "$t/f$seed" floor \
+    && same "$t/fref" "$t/f$seed" floor "floor, $np ranks, random assignment $seed" \
+    || bad "floor on $np ranks (random:$seed): exit $?"
+  rm -rf "$t/f$seed"
+done
+
+# ---------------------------------------------------------------- a rank fails
+for spec in 1:init 2:refine:3 1:push-pull:2 0:refine:2; do
+  start=$(date +%s)
+  HRAD_TEST_FAIL=$spec mpi 3 "${q[@]}" --threads 1 -o "$t/x" cornell 2> "$t/err"
+  rc=$? secs=$(($(date +%s) - start))
+  n=$(grep -c '^hrad:' "$t/err")
+  if [ $rc -ne 0 ] && [ $rc -ne 124 ] && [ "$n" = 1 ] && grep -q "^hrad: rank ${spec%%:*}: .*injected by HRAD_TEST_FAIL" "$t/err" \
+     && [ ! -e "$t/x" ]; then
+    ok "rank failure $spec: exit $rc, one line, no outputs (${secs}s)"
+  else
+    bad "rank failure $spec: exit $rc, $n hrad lines, outputs $(ls "$t/x" 2>/dev/null | wc -l)"
+    cat "$t/err"
+  fi
+done
+
+# ---------------------------------------------------------------- bad input and usage
+printf 'v 0 0 0\nv 1 0 0\nf 1 2 9\n' > "$t/bad.obj"
+mpi 3 --quiet -o "$t/y" "$t/bad.obj" 2> "$t/err"
+rc=$?
+[ $rc -ne 0 ] && [ "$(grep -c '^hrad:' "$t/err")" = 1 ] && grep -q "bad.obj:3: vertex index 9 out of range" "$t/err" \
+  && [ ! -e "$t/y" ] && ok "bad input on 3 ranks: one line, exit $rc" \
+  || { bad "bad input on 3 ranks: exit $rc"; cat "$t/err"; }
+mpi 2 --quiet --checkpoint "$t/ck" -o "$t/y" cornell 2> "$t/err"
+rc=$?
+[ $rc -ne 0 ] && grep -q "^hrad: --checkpoint and --resume do not work with more than one MPI rank" "$t/err" \
+  && ok "--checkpoint on 2 ranks refused (exit $rc)" || { bad "--checkpoint on 2 ranks: exit $rc"; cat "$t/err"; }
+mpi 2 --quiet --balance nonsense -o "$t/y" cornell 2> "$t/err"
+[ "$(grep -c "^hrad: --balance must be" "$t/err")" = 1 ] && ok "--balance nonsense: one usage line" \
+  || { bad "--balance nonsense"; cat "$t/err"; }
+
+echo "$passes passed, $fails failed"
+[ $fails -eq 0 ]
