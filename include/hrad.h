@@ -272,6 +272,23 @@ int hr_dist_size(const hr_dist *d);     /* 1 for NULL */
  * are not written or read with more than one rank yet. */
 hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, hr_err *err);
 
+/* One rank's share of a distributed run (hr_solver_rank_stats). */
+typedef struct hr_rank_stats {
+  int rank;
+  int surfaces;          /* surfaces (element trees) it owns */
+  int64_t links;         /* links it holds (live) */
+  int64_t leaves;        /* leaf elements of its surfaces */
+  int64_t rays;          /* rays it cast */
+  int64_t mpi_calls;     /* collectives it took part in */
+  int64_t mpi_bytes;     /* bytes it sent in them */
+  double busy_s;         /* solve time outside MPI */
+  double mpi_s;          /* time inside MPI, waiting for the slowest rank included */
+  double peak_rss_mb;
+} hr_rank_stats;
+/* Every rank's share after hr_solver_run: a collective (every rank calls it); rank 0 gets
+ * hr_dist_size entries in 'all', the others may pass NULL. One process: one entry. */
+hr_status hr_solver_rank_stats(const hr_solver *s, hr_rank_stats *all, hr_err *err);
+
 /* Area-weighted mean radiosity of input polygon 'poly' (rgb out). */
 void hr_solver_poly_radiosity(const hr_solver *s, int poly, double rgb[3]);
 

@@ -605,6 +605,24 @@ void hr_solver_stats(const hr_solver *s, hr_stats *st) {
   st->time_s = s->t;
 }
 
+hr_status hr_solver_rank_stats(const hr_solver *s, hr_rank_stats *all, hr_err *err) {
+  hr_rank_stats me;
+  memset(&me, 0, sizeof me);
+  me.rank = s->rank;
+  for (int i = 0; i < s->scene->nsurfs; i++) me.surfaces += hr_owns(s, i);
+  me.links = s->nlinks - s->ndead;
+  for (int64_t e = 0; e < s->nel; e++)
+    me.leaves += s->el[e].child < 0 && hr_owns(s, s->el[e].surf);
+  me.rays = s->rays;
+  hr_dist_counters(s->dist, &me.mpi_calls, &me.mpi_bytes, &me.mpi_s);
+  me.busy_s = s->t.total - me.mpi_s;
+  struct rusage ru;
+  if (getrusage(RUSAGE_SELF, &ru) == 0) me.peak_rss_mb = (double)ru.ru_maxrss / 1024.0;
+  if (hr_dist_gather(s->dist, &me, sizeof me, all) != HR_OK)
+    return hr_err_set(err, HR_ERR_TOO_BIG, "too many ranks");
+  return HR_OK;
+}
+
 void hr_solver_poly_radiosity(const hr_solver *s, int poly, double rgb[3]) {
   const hr_scene *sc = s->scene;
   double acc[3] = {0, 0, 0}, area = 0;

@@ -1477,6 +1477,37 @@ static int is_builtin(const char *name) {
   return 0;
 }
 
+/* The per-rank table of a distributed run (PETSc -log_view style): each rank, then min, mean
+ * and max over ranks; imbalance is max over mean of the busy time. */
+static void print_ranks(const hr_rank_stats *r, int n) {
+  fprintf(stderr, "rank surfaces     links    leaves        rays   busy s    mpi s  mpi calls"
+                  "   MB sent   RSS MB\n");
+  double lo[8], hi[8], sum[8];
+  for (int i = 0; i < n; i++) {
+    const double v[8] = {(double)r[i].surfaces, (double)r[i].links,     (double)r[i].leaves,
+                         (double)r[i].rays,     r[i].busy_s,            r[i].mpi_s,
+                         (double)r[i].mpi_calls, (double)r[i].mpi_bytes / 1e6};
+    for (int k = 0; k < 8; k++) {
+      lo[k] = i ? fmin(lo[k], v[k]) : v[k];
+      hi[k] = i ? fmax(hi[k], v[k]) : v[k];
+      sum[k] = (i ? sum[k] : 0) + v[k];
+    }
+    fprintf(stderr, "%4d %8d %9lld %9lld %11lld %8.3f %8.3f %10lld %9.2f %8.1f\n", r[i].rank,
+            r[i].surfaces, (long long)r[i].links, (long long)r[i].leaves, (long long)r[i].rays,
+            r[i].busy_s, r[i].mpi_s, (long long)r[i].mpi_calls, (double)r[i].mpi_bytes / 1e6,
+            r[i].peak_rss_mb);
+  }
+  const char *name[3] = {" min", "mean", " max"};
+  for (int j = 0; j < 3; j++) {
+    double v[8];
+    for (int k = 0; k < 8; k++) v[k] = j == 0 ? lo[k] : j == 1 ? sum[k] / n : hi[k];
+    fprintf(stderr, "%s %8.0f %9.0f %9.0f %11.0f %8.3f %8.3f %10.0f %9.2f\n", name[j], v[0],
+            v[1], v[2], v[3], v[4], v[5], v[6], v[7]);
+  }
+  fprintf(stderr, "imbalance (max/mean busy) %.2f, links max/mean %.2f\n",
+          sum[4] > 0 ? hi[4] / (sum[4] / n) : 1, sum[1] > 0 ? hi[1] / (sum[1] / n) : 1);
+}
+
 /* "hrad: wrote DIR/{a,b,...}" and the number of snapshots. */
 static void print_wrote(const cli *c) {
   fprintf(stderr, "hrad: wrote %s/{", c->disp);
@@ -1587,6 +1618,16 @@ int main(int argc, char **argv) {
   }
   c.ckpt_last = now_s();
   st = hr_solver_run(s, on_iter, &c, &err);
+  const int nranks = hr_dist_size(g_dist);
+  hr_rank_stats *ranks = NULL;
+  if (nranks > 1 && st == HR_OK) { /* every rank's share, to rank 0 */
+    if (g_rank == 0) ranks = xrealloc(NULL, (size_t)nranks * sizeof *ranks);
+    hr_err rerr = {{0}};
+    if (hr_solver_rank_stats(s, ranks, &rerr) != HR_OK) {
+      free(ranks);
+      ranks = NULL;
+    }
+  }
   if (g_rank != 0) { /* its part is done: rank 0 writes the outputs */
     if (st != HR_OK) check(st, &err);
     hr_solver_destroy(&s);
@@ -1625,11 +1666,13 @@ int main(int argc, char **argv) {
   hr_solver_stats(s, &stats);
   if (!c.quiet) {
     hr_report_table(stderr, &stats);
+    if (ranks) print_ranks(ranks, nranks);
     if (!stats.converged)
       fprintf(stderr, "hrad: warning: stopped after %d iterations without converging\n",
               stats.iterations);
     print_wrote(&c);
   }
+  free(ranks);
   names_free(&c.outs);
   hr_solver_destroy(&s);
   hr_scene_destroy(&scene);

@@ -17,7 +17,18 @@ struct hr_dist {
   MPI_Comm comm;
   int rank, size;
   int own_init; /* MPI_Init was ours: finalize it */
+  /* what this rank spent in MPI (hr_dist_counters): calls, bytes it sent (a reduction counts
+   * its whole vector), seconds inside them, waiting for the slowest rank included */
+  int64_t calls, bytes;
+  double secs;
 };
+
+/* Counts one collective that sent 'bytes' and started at 't0'. */
+static void count(hr_dist *d, int64_t bytes, double t0) {
+  d->calls++;
+  d->bytes += bytes;
+  d->secs += MPI_Wtime() - t0;
+}
 
 /* Elements per collective call: well below INT_MAX, in any MPI type used here. */
 #define CHUNK (INT64_C(1) << 26)
@@ -74,11 +85,29 @@ void hr_dist_barrier(const hr_dist *d) {
 
 static void allreduce(const hr_dist *d, void *v, int64_t n, MPI_Datatype t, size_t sz, MPI_Op op) {
   if (!d || d->size == 1) return;
+  const double t0 = MPI_Wtime();
   char *p = v;
   for (int64_t o = 0; o < n; o += CHUNK) {
     int64_t k = n - o < CHUNK ? n - o : CHUNK;
     MPI_Allreduce(MPI_IN_PLACE, p + (size_t)o * sz, (int)k, t, op, d->comm);
   }
+  count((hr_dist *)d, n * (int64_t)sz, t0);
+}
+
+void hr_dist_counters(const hr_dist *d, int64_t *calls, int64_t *bytes, double *secs) {
+  *calls = d ? d->calls : 0;
+  *bytes = d ? d->bytes : 0;
+  *secs = d ? d->secs : 0;
+}
+
+hr_status hr_dist_gather(const hr_dist *d, const void *mine, size_t n, void *all) {
+  if (!d) {
+    memcpy(all, mine, n);
+    return HR_OK;
+  }
+  if (n > INT_MAX) return HR_ERR_TOO_BIG;
+  MPI_Gather(mine, (int)n, MPI_BYTE, all, (int)n, MPI_BYTE, 0, d->comm);
+  return HR_OK;
 }
 
 void hr_dist_sum_f64(const hr_dist *d, double *v, int64_t n) {
@@ -99,6 +128,7 @@ void hr_dist_max_i64(const hr_dist *d, int64_t *v, int64_t n) {
 hr_status hr_dist_alltoall(const hr_dist *d, const void *send, const int64_t *sbytes,
                            void **recv, int64_t *rbytes_total, int64_t *rbytes) {
   const int P = d->size;
+  const double t0 = MPI_Wtime();
   int64_t *soff = malloc((size_t)P * sizeof *soff), *roff = malloc((size_t)P * sizeof *roff);
   MPI_Request *rq = malloc((size_t)(2 * P) * sizeof *rq);
   int64_t bad = !soff || !roff || !rq;
@@ -144,6 +174,7 @@ hr_status hr_dist_alltoall(const hr_dist *d, const void *send, const int64_t *sb
   free(rq);
   *recv = rb;
   *rbytes_total = tr;
+  count((hr_dist *)d, ts - sbytes[d->rank], t0);
   return HR_OK;
 }
 
@@ -171,9 +202,11 @@ hr_status hr_dist_union_i32(const hr_dist *d, const int32_t *mine, int64_t n, in
     return bad == 2 ? HR_ERR_TOO_BIG : HR_ERR_NOMEM;
   }
   int ni = (int)n;
+  const double t0 = MPI_Wtime();
   MPI_Allgather(&ni, 1, MPI_INT, cnt, 1, MPI_INT, d->comm);
   for (int p = 0, o = 0; p < P; p++) dsp[p] = o, o += cnt[p];
   MPI_Allgatherv(mine, ni, MPI_INT32_T, v, cnt, dsp, MPI_INT32_T, d->comm);
+  count((hr_dist *)d, n * (int64_t)sizeof *mine, t0);
   free(cnt);
   free(dsp);
   int64_t k = 0;
