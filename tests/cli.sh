@@ -273,6 +273,28 @@ wait $pid 2>/dev/null
 cmp -s "$t/ckA/surfaces.csv" "$t/ckKr/surfaces.csv" \
   && ok "SIGKILL, then $(grep -o 'resumed .*' "$t/err.txt"): surfaces.csv identical" \
   || bad "resume after SIGKILL: $(head -2 "$t/err.txt")"
+# kill -9 at random moments, three times in a row, each time resuming the last checkpoint (the
+# kill may land while a checkpoint is being written: the previous one must stay whole).
+rm -f "$t/ckR.ckpt"
+trail=""
+for round in 1 2 3; do
+  res=()
+  [ -e "$t/ckR.ckpt" ] && res=(--resume "$t/ckR.ckpt")
+  ( exec "$hrad" --size 32x24 cornell -o "$t/ckR" --threads $((round % 2 + 1)) --checkpoint "$t/ckR.ckpt" \
+      --checkpoint-every 0 "${res[@]}" 2> "$t/bgR.txt" ) &
+  pid=$!
+  sleep "0.$((RANDOM % 9 + 1))$((RANDOM % 10))"
+  kill -KILL $pid 2>/dev/null
+  wait $pid 2>/dev/null
+  trail="$trail $(grep -o 'after iteration [0-9]*' "$t/bgR.txt" | grep -o '[0-9]*' || echo start)"
+done
+res=()
+[ -e "$t/ckR.ckpt" ] && res=(--resume "$t/ckR.ckpt")
+"$hrad" --size 32x24 cornell -o "$t/ckRr" "${res[@]}" 2> "$t/err.txt"
+trail="$trail $(grep -o 'after iteration [0-9]*' "$t/err.txt" | grep -o '[0-9]*' || echo start)"
+cmp -s "$t/ckA/surfaces.csv" "$t/ckRr/surfaces.csv" \
+  && ok "three kill -9 at random moments, resumed after iterations:$trail: surfaces.csv identical" \
+  || bad "random kills (resumed after:$trail): $(head -2 "$t/err.txt")"
 rm -f "$t/ckI.ckpt"
 ( trap - INT; exec "$hrad" --size 32x24 -o "$t/ckI" --checkpoint "$t/ckI.ckpt" --checkpoint-every 1e9 cornell 2> "$t/bg.txt" ) &
 pid=$!
