@@ -264,13 +264,17 @@ void hr_dist_abort(const hr_dist *d, int code); /* ends every rank (MPI_Abort); 
 int hr_dist_rank(const hr_dist *d);     /* 0 for NULL */
 int hr_dist_size(const hr_dist *d);     /* 1 for NULL */
 /* Spreads the solve over the ranks of 'd' (call on every rank, before hr_solver_run, with the
- * same scene, options and 'owner'): owner[i] is the rank that holds surface i's element tree and
- * the links it receives; NULL spreads the surfaces by area, largest first, each to the rank
- * with the least area so far. Every rank then calls hr_solver_run; each holds every element's
- * radiosity afterwards (for outputs) but only its own links. Results, counts and outputs are
- * bit-identical to one process for any 'owner'. HR_ERR_INVALID for a bad owner; checkpoints
- * are not written or read with more than one rank yet. */
-hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, hr_err *err);
+ * same scene, options and arguments). An element is owned by a rank, which holds the links it
+ * receives. owner[i] is the rank of surface i's root; new elements belong to their parent's
+ * rank; NULL spreads the surfaces by area, largest first, each to the rank with the least area
+ * so far. A non-zero 'scatter' instead sends every element, at any depth, to a rank drawn from
+ * (scatter, its gid): one surface's tree spread over every rank. Every rank then calls
+ * hr_solver_run; each holds every element's radiosity afterwards (for outputs) but only its own
+ * links. Results, counts and outputs are bit-identical to one process for any assignment.
+ * HR_ERR_INVALID for a bad owner; checkpoints are not written or read with more than one rank
+ * yet. */
+hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uint64_t scatter,
+                             hr_err *err);
 
 /* One rank's share of a distributed run (hr_solver_rank_stats). */
 typedef struct hr_rank_stats {

@@ -75,6 +75,9 @@ static int reserve(hr_solver *s, int64_t need) {
   double *op = realloc(s->open, (size_t)nc * sizeof *op);
   if (!op) return 0;
   s->open = op;
+  int32_t *ow = realloc(s->eown, (size_t)nc * sizeof *ow);
+  if (!ow) return 0;
+  s->eown = ow;
 
   s->cap_el = nc;
   return 1;
@@ -87,6 +90,7 @@ hr_status hr_elem_init(hr_solver *s) {
     hr_elem *e = &s->el[i];
     memset(e, 0, sizeof *e);
     e->gid = ((uint64_t)i << HR_GID_PATH_BITS) | 1u;
+    s->eown[i] = 0; /* hr_solver_set_dist spreads them */
     e->surf = i;
     e->parent = -1;
     e->child = -1;
@@ -181,6 +185,7 @@ hr_status hr_elem_subdivide(hr_solver *s, int32_t idx) {
     s->bref[first + k] = s->bref[idx];
     s->bvar[first + k] = 0;
     s->open[first + k] = s->open[idx]; /* hr_elem_open, after the round's subdivisions */
+    s->eown[first + k] = hr_elem_owner(s, first + k, idx);
   }
   p->child = first;
   s->nel += 4;

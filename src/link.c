@@ -312,9 +312,9 @@ static hr_status send_to_owners(hr_solver *s, hr_status st, hr_err *err) {
     free(cnt), free(rb), free(out), free(at);
     return st;
   }
-  for (int64_t k = 0; k < s->nlinks; k++) cnt[s->owner[s->links[k].r]]++;
+  for (int64_t k = 0; k < s->nlinks; k++) cnt[s->eown[s->links[k].r]]++;
   for (int p = 0; p < P; p++) at[p + 1] = at[p] + cnt[p];
-  for (int64_t k = 0; k < s->nlinks; k++) out[at[s->owner[s->links[k].r]]++] = s->links[k];
+  for (int64_t k = 0; k < s->nlinks; k++) out[at[s->eown[s->links[k].r]]++] = s->links[k];
   for (int p = 0; p < P; p++) cnt[p] *= (int64_t)sizeof *out;
   void *recv = NULL;
   int64_t tot = 0;
@@ -439,6 +439,84 @@ static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uin
   free(lens);
   free(which);
   return failed == 2 ? HR_ERR_TOO_BIG : failed ? HR_ERR_NOMEM : HR_OK;
+}
+
+/* Distributed refinement: the children of a link split on its receiver side may be received by
+ * elements of other ranks; each goes to its receiver's owner with its candidate list (the record,
+ * then ncand int32 blocker ids). The links that stay keep their place; the received ones are
+ * appended in rank order (order does not matter: see send_to_owners). A collective: 'st' is
+ * this rank's status so far, and every rank returns the same status (a pool that cannot hold the
+ * received lists fails locally, and the next collective tells the others). */
+static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_status st,
+                             hr_err *err) {
+  if ((st = hr_dist_agree(s, st, err)) != HR_OK) return st;
+  const int P = s->nranks;
+  hr_link *cur = *pcur;
+  int64_t n = *pn, nstay = 0;
+  int64_t *sb = calloc((size_t)P, sizeof *sb), *rb = malloc((size_t)P * sizeof *rb);
+  int64_t *at = calloc((size_t)P + 1, sizeof *at);
+  char *out = NULL;
+  if (sb && rb && at) {
+    for (int64_t i = 0; i < n; i++) {
+      const int d = s->eown[cur[i].r];
+      if (d != s->rank) sb[d] += (int64_t)sizeof(hr_link) + 4 * (int64_t)cur[i].ncand;
+    }
+    for (int p = 0; p < P; p++) at[p + 1] = at[p] + sb[p];
+    out = malloc((size_t)(at[P] > 0 ? at[P] : 1));
+  }
+  st = out ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
+  if ((st = hr_dist_agree(s, st, err)) != HR_OK) {
+    free(sb), free(rb), free(at), free(out);
+    return st;
+  }
+  for (int64_t i = 0; i < n; i++) {
+    const int d = s->eown[cur[i].r];
+    if (d == s->rank) {
+      cur[nstay++] = cur[i];
+      continue;
+    }
+    memcpy(out + at[d], &cur[i], sizeof(hr_link));
+    at[d] += (int64_t)sizeof(hr_link);
+    const size_t cb = 4 * (size_t)cur[i].ncand;
+    if (cb) memcpy(out + at[d], s->pool + cur[i].cand_off, cb);
+    at[d] += (int64_t)cb;
+  }
+  void *recv = NULL;
+  int64_t tot = 0;
+  st = hr_dist_alltoall(s->dist, out, sb, &recv, &tot, rb);
+  free(sb), free(rb), free(at), free(out);
+  if (st != HR_OK) return hr_err_set(err, st, "out of memory during refinement");
+  /* unpack: count, make room, copy */
+  int64_t nr = 0, nc = 0;
+  for (int64_t o = 0; o < tot; nr++) {
+    hr_link l;
+    memcpy(&l, (char *)recv + o, sizeof l);
+    o += (int64_t)sizeof l + 4 * (int64_t)l.ncand;
+    nc += l.ncand;
+  }
+  hr_link *grown = realloc(cur, (size_t)(nstay + nr > 0 ? nstay + nr : 1) * sizeof *grown);
+  if (!grown || s->npool + nc > POOL_MAX ||
+      !pool_reserve(&s->pool, &s->cap_pool, s->npool + nc)) {
+    if (grown) *pcur = grown;
+    *pn = nstay; /* the links sent away are gone from here in any case */
+    free(recv);
+    return hr_err_set(err, s->npool + nc > POOL_MAX ? HR_ERR_TOO_BIG : HR_ERR_NOMEM,
+                      "refinement exceeds a limit or is out of memory");
+  }
+  cur = grown;
+  for (int64_t o = 0, k = nstay; o < tot; k++) {
+    memcpy(&cur[k], (char *)recv + o, sizeof(hr_link));
+    o += (int64_t)sizeof(hr_link);
+    const size_t cb = 4 * (size_t)cur[k].ncand;
+    cur[k].cand_off = (uint32_t)s->npool;
+    if (cb) memcpy(s->pool + s->npool, (char *)recv + o, cb);
+    s->npool += cur[k].ncand;
+    o += (int64_t)cb;
+  }
+  free(recv);
+  *pcur = cur;
+  *pn = nstay + nr;
+  return HR_OK;
 }
 
 /* Subdivides the elements marked in mark[0, n) in increasing idx, so that element indices do not
@@ -684,6 +762,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       ncur = 0;
     }
     free(coff);
+    if (s->dist) st = route_links(s, &cur, &ncur, st, err);
   }
   free(cur);
   cur = NULL;

@@ -139,7 +139,7 @@ void hr_solver_destroy(hr_solver **ps) {
   free(s->xidx);
   free(s->ls);
   free(s->lfo);
-  free(s->owner);
+  free(s->eown);
   free(s);
   *ps = NULL;
 }
@@ -261,7 +261,6 @@ static double push_pull_all(hr_solver *s) {
   int n = s->scene->nsurfs;
 #pragma omp parallel for schedule(dynamic, 8) reduction(max : maxc) if (s->nel > PAR_MIN)
   for (int i = 0; i < n; i++) {
-    if (!hr_owns(s, i)) continue;
     double zero[5] = {0, 0, 0, 0, 0}, b[3], range[2];
     double d = pushpull(s, i, zero, b, range);
     maxc = d > maxc ? d : maxc;
@@ -269,12 +268,13 @@ static double push_pull_all(hr_solver *s) {
   return maxc;
 }
 
-/* Distributed runs: what every rank needs of every element after push-pull (the owners'
- * B, Bs, bref and bvar: refinement reads them at sources, gathering reads Bs, outputs read B)
- * and the largest change, shared by a sum in which the other ranks add exact zeros; so every
- * rank holds the same values bit for bit. */
-#define SYNC_W 8
-static hr_status sync_state(hr_solver *s, double *change, hr_err *err) {
+/* Distributed runs: every rank needs every element's gathered light for push-pull, which each
+ * rank then runs over every surface tree (push-pull is O(elements), the links are the work): so
+ * a tree spread over ranks needs no push or pull messages, and every rank ends with the same B,
+ * Bs, bref and bvar, which refinement and gathering read at the sources. An element's links all
+ * live at its owner, so the other ranks hold exact zeros for it and the sum is exact. */
+#define SYNC_W 5
+static hr_status sync_gathered(hr_solver *s, hr_err *err) {
   if (!s->dist) return HR_OK;
   double *buf = malloc((size_t)(s->nel * SYNC_W + 1) * sizeof *buf);
   hr_status st = buf ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
@@ -288,26 +288,19 @@ static hr_status sync_state(hr_solver *s, double *change, hr_err *err) {
 #pragma omp parallel for schedule(static) if (s->nel > PAR_MIN)
   for (int64_t e = 0; e < s->nel; e++) {
     double *b = buf + e * SYNC_W;
-    if (!hr_owns(s, s->el[e].surf)) {
-      memset(b, 0, SYNC_W * sizeof *b);
-      continue;
-    }
-    memcpy(b, s->B[e], 3 * sizeof *b);
-    memcpy(b + 3, s->Bs[e], 3 * sizeof *b);
-    b[6] = s->bref[e];
-    b[7] = s->bvar[e];
+    memcpy(b, s->G[e], 3 * sizeof *b);
+    b[3] = s->Gu[e];
+    b[4] = s->Gf[e];
   }
   hr_dist_sum_f64(s->dist, buf, s->nel * SYNC_W);
 #pragma omp parallel for schedule(static) if (s->nel > PAR_MIN)
   for (int64_t e = 0; e < s->nel; e++) {
     const double *b = buf + e * SYNC_W;
-    memcpy(s->B[e], b, 3 * sizeof *b);
-    memcpy(s->Bs[e], b + 3, 3 * sizeof *b);
-    s->bref[e] = b[6];
-    s->bvar[e] = b[7];
+    memcpy(s->G[e], b, 3 * sizeof *b);
+    s->Gu[e] = b[3];
+    s->Gf[e] = b[4];
   }
   free(buf);
-  hr_dist_max_f64(s->dist, change, 1);
   return HR_OK;
 }
 
@@ -327,29 +320,45 @@ hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err) {
   return st;
 }
 
-hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, hr_err *err) {
+int32_t hr_elem_owner(const hr_solver *s, int64_t e, int64_t parent) {
+  if (!s->dist) return 0;
+  if (!s->scatter) return s->eown[parent];
+  /* splitmix64 of (seed, gid) */
+  uint64_t z = s->scatter ^ (s->el[e].gid * UINT64_C(0x9e3779b97f4a7c15));
+  z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
+  z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
+  return (int32_t)((z ^ (z >> 31)) % (uint64_t)s->nranks);
+}
+
+hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uint64_t scatter,
+                             hr_err *err) {
   if (s->started) return hr_err_set(err, HR_ERR_INVALID, "hr_solver_set_dist: solver has run");
   const int P = hr_dist_size(d), n = s->scene->nsurfs;
   if (!d || P == 1) return HR_OK; /* one process: nothing to spread */
-  int32_t *o = malloc((size_t)n * sizeof *o);
-  if (!o) return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
-  if (owner) {
-    for (int i = 0; i < n; i++)
+  s->dist = d;
+  s->rank = hr_dist_rank(d);
+  s->nranks = P;
+  s->scatter = scatter;
+  if (scatter) {
+    for (int i = 0; i < n; i++) s->eown[i] = hr_elem_owner(s, i, i);
+  } else if (owner) {
+    for (int i = 0; i < n; i++) {
       if (owner[i] < 0 || owner[i] >= P) {
-        free(o);
+        s->dist = NULL;
         return hr_err_set(err, HR_ERR_INVALID, "surface %d: owner %d is not a rank (0..%d)", i,
                           owner[i], P - 1);
       }
-    memcpy(o, owner, (size_t)n * sizeof *o);
+      s->eown[i] = owner[i];
+    }
   } else {
     /* by area, largest first (ties by index), each to the rank with the least so far: the
      * work of a surface's tree grows with its area over A_e */
     int32_t *ord = malloc((size_t)n * sizeof *ord);
     double *load = calloc((size_t)P, sizeof *load);
     if (!ord || !load) {
-      free(o);
       free(ord);
       free(load);
+      s->dist = NULL;
       return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
     }
     for (int i = 0; i < n; i++) ord[i] = i;
@@ -363,16 +372,12 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, hr_
     for (int i = 0; i < n; i++) {
       int best = 0;
       for (int p = 1; p < P; p++) best = load[p] < load[best] ? p : best;
-      o[ord[i]] = best;
+      s->eown[ord[i]] = best;
       load[best] += s->scene->surfs[ord[i]].area;
     }
     free(ord);
     free(load);
   }
-  free(s->owner);
-  s->owner = o;
-  s->dist = d;
-  s->rank = hr_dist_rank(d);
   const char *tf = getenv("HRAD_TEST_FAIL");
   if (tf) {
     static const char *const names[] = {"", "init", "refine", "push-pull"};
@@ -492,9 +497,9 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
   hr_dist_sum_i64(s->dist, nnew, 1);
   double tb = hr_now();
   gather(s);
+  if ((st = sync_gathered(s, err)) != HR_OK) return st;
   double tc = hr_now();
   double abs = push_pull_all(s);
-  if ((st = sync_state(s, &abs, err)) != HR_OK) return st;
   sync_counts(s);
   *change = abs / s->unit;
   if ((st = check_physical(s, err)) != HR_OK) return st;
@@ -611,8 +616,7 @@ hr_status hr_solver_rank_stats(const hr_solver *s, hr_rank_stats *all, hr_err *e
   me.rank = s->rank;
   for (int i = 0; i < s->scene->nsurfs; i++) me.surfaces += hr_owns(s, i);
   me.links = s->nlinks - s->ndead;
-  for (int64_t e = 0; e < s->nel; e++)
-    me.leaves += s->el[e].child < 0 && hr_owns(s, s->el[e].surf);
+  for (int64_t e = 0; e < s->nel; e++) me.leaves += s->el[e].child < 0 && hr_owns(s, e);
   me.rays = s->rays;
   hr_dist_counters(s->dist, &me.mpi_calls, &me.mpi_bytes, &me.mpi_s);
   me.busy_s = s->t.total - me.mpi_s;

@@ -117,8 +117,9 @@ struct hr_solver {
    * element (the same arrays, in the same order, on every rank) but only the links whose
    * receiver lies in a surface it owns; after push-pull the owners' radiosities are shared. */
   hr_dist *dist;
-  int32_t *owner;     /* per surface: the rank that owns its tree */
-  int rank;
+  int32_t *eown;      /* per element: the rank that owns it and the links it receives */
+  uint64_t scatter;   /* non-zero: every new element goes to a rank drawn from (scatter, gid) */
+  int rank, nranks;
   int64_t g_links, g_rays, g_initial; /* over all ranks (= the local counts in one process) */
   /* Test hook (HRAD_TEST_FAIL=RANK:PHASE:ITER, read by hr_solver_set_dist): rank 'fail_rank'
    * fails with "out of memory" in phase fail_phase (HR_PHASE_*) of iteration fail_iter. */
@@ -132,10 +133,13 @@ static inline int hr_test_fail(const hr_solver *s, int phase) {
          (phase == HR_PHASE_INIT || s->iterations + 1 == s->fail_iter);
 }
 
-/* 1 if this rank owns surface 'surf' (always in one process). */
-static inline int hr_owns(const hr_solver *s, int32_t surf) {
-  return !s->owner || s->owner[surf] == s->rank;
+/* 1 if this rank owns element 'e' (always in one process). */
+static inline int hr_owns(const hr_solver *s, int64_t e) {
+  return !s->dist || s->eown[e] == s->rank;
 }
+/* The owner of a new element 'e' (idx) below 'parent': its parent's, or with s->scatter a rank
+ * drawn from the seed and its gid (tests: any assignment gives the same answer). */
+int32_t hr_elem_owner(const hr_solver *s, int64_t e, int64_t parent);
 /* Makes every rank see a failure of any: returns 'st' where this rank failed, HR_ERR_REMOTE
  * (with a message) where another did, HR_OK where none did. A collective in distributed runs. */
 hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err);

@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The distributed solver under mpirun (README "Many processes"): the same answer, bit for bit, as
-# one process, for P = 1, 2, 3, 4, 7 ranks, 1 or 2 threads per rank and random assignments of the
-# surfaces to ranks (surfaces.csv, the images, the meshes and the counts of stats.json); a rank
-# that fails in any phase (HRAD_TEST_FAIL) ends the whole run with one line, exit status 1, no
-# outputs and no hang; bad input reported once; options not supported yet refused.
+# one process, for P = 1, 2, 3, 4, 7 ranks, 1 or 2 threads per rank and random assignments of
+# the elements (subtrees at every depth) to ranks (surfaces.csv, the images, the meshes and the
+# counts of stats.json); a rank that fails in any phase (HRAD_TEST_FAIL) ends the whole run with
+# one line, exit status 1, no outputs and no hang; bad input reported once; options not supported
+# yet refused.
 # Runs above 2 ranks are oversubscribed on 2 cores: correctness only, no timing here.
 # Usage: mpi.sh HRAD_BINARY SOURCE_DIR SHARED_DIR
 set -u
@@ -43,9 +44,11 @@ mpi 2 "${q[@]}" --threads 2 -o "$t/c2t2" cornell && same "$t/c1" "$t/c2t2" corne
   "cornell, 2 ranks x 2 threads" || bad "cornell 2x2: exit $?"
 
 # ---------------------------------------------------------------- random assignments
+# --balance random:N sends every element, at any depth, to a random rank: trees spread over all
+# ranks, links split across ranks. MPI_STRESS=50 runs 50 assignments instead of 10.
 f=(--quiet --size 64x48 --bf-low 1e-2)
 "$hrad" "${f[@]}" --threads 1 -o "$t/fref" floor || bad "plain floor run failed"
-for seed in 1 2 3 4 5 6 7 8 9 10; do
+for seed in $(seq "${MPI_STRESS:-10}"); do
   np=$((3 + seed % 5))
   mpi "$np" "${f[@]}" --threads 1 --balance "random:$seed" -o "$t/f$seed" floor \
     && same "$t/fref" "$t/f$seed" floor "floor, $np ranks, random assignment $seed" \

@@ -496,7 +496,8 @@ static void usage(void) {
       "\n"
       "Many processes (mpirun -np P hrad ..., README 'Many processes'):\n"
       "  --balance area       surfaces to ranks by area, largest first (default)\n"
-      "  --balance random:N   surfaces to ranks at random (seed N): the answer is the same\n"
+      "  --balance random:N   every element, at any depth, to a rank at random (seed N): the\n"
+      "                       answer is the same (a test of the distribution)\n"
       "\n"
       "Checking (an independent Monte Carlo path tracer, README 'Checking the light'):\n"
       "  --verify N           after solving, estimate every polygon with N paths, print a\n"
@@ -1582,21 +1583,9 @@ int main(int argc, char **argv) {
   else hr_scene_auto_camera(scene, &c.cam);
   hr_solver *s = NULL;
   check(hr_solver_create(scene, &c.opt, &s, &err), &err);
-  if (hr_dist_size(g_dist) > 1) {
-    int32_t *owner = NULL;
-    if (c.balance_random) {
-      const int P = hr_dist_size(g_dist);
-      owner = xrealloc(NULL, (size_t)scene->nsurfs * sizeof *owner);
-      uint64_t x = c.balance_seed;
-      for (int i = 0; i < scene->nsurfs; i++) { /* splitmix64 */
-        uint64_t z = (x += UINT64_C(0x9e3779b97f4a7c15));
-        z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
-        z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
-        owner[i] = (int32_t)((z ^ (z >> 31)) % (uint64_t)P);
-      }
-    }
-    check(hr_solver_set_dist(s, g_dist, owner, &err), &err);
-    free(owner);
+  if (hr_dist_size(g_dist) > 1) { /* --balance random:N scatters elements (N = 0 acts as 1) */
+    const uint64_t scatter = c.balance_random ? (c.balance_seed ? c.balance_seed : 1) : 0;
+    check(hr_solver_set_dist(s, g_dist, NULL, scatter, &err), &err);
   }
   if (c.resume) {
     check(hr_solver_resume(s, c.resume, &err), &err);
