@@ -42,6 +42,8 @@ for np in 1 2 3 4 7; do
 done
 mpi 2 "${q[@]}" --threads 2 -o "$t/c2t2" cornell && same "$t/c1" "$t/c2t2" cornell \
   "cornell, 2 ranks x 2 threads" || bad "cornell 2x2: exit $?"
+mpi 3 "${q[@]}" --threads 1 --balance area -o "$t/c3a" cornell && same "$t/c1" "$t/c3a" cornell \
+  "cornell, 3 ranks, --balance area (whole surfaces)" || bad "cornell --balance area: exit $?"
 
 # ---------------------------------------------------------------- random assignments
 # --balance random:N sends every element, at any depth, to a random rank: trees spread over all

@@ -73,7 +73,7 @@ typedef struct names {
 
 typedef struct cli {
   hr_options opt;
-  int balance_random;     /* --balance random:SEED (tests: any assignment gives the same answer) */
+  int balance_random;     /* --balance random[:SEED] (the default) or area */
   uint64_t balance_seed;
   const char *scene_arg;
   const char *outdir; /* -o as given */
@@ -495,9 +495,10 @@ static void usage(void) {
       "                       outputs are written (e.g. other --camera or --size)\n"
       "\n"
       "Many processes (mpirun -np P hrad ..., README 'Many processes'):\n"
-      "  --balance area       surfaces to ranks by area, largest first (default)\n"
-      "  --balance random:N   every element, at any depth, to a rank at random (seed N): the\n"
-      "                       answer is the same (a test of the distribution)\n"
+      "  --balance random[:N] every element, at any depth, to a rank drawn from its id and N\n"
+      "                       (default, N = 1): the best measured balance of work\n"
+      "  --balance area       whole surfaces to ranks by area, largest first\n"
+      "                       (the answer is the same for every assignment)\n"
       "\n"
       "Checking (an independent Monte Carlo path tracer, README 'Checking the light'):\n"
       "  --verify N           after solving, estimate every polygon with N paths, print a\n"
@@ -689,6 +690,7 @@ static void parse_args(cli *c, int argc, char **argv) {
   c->w = 800;
   c->h = 600;
   c->ckpt_every = CKPT_EVERY;
+  c->balance_random = 1, c->balance_seed = 1;
   int opts_done = 0;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
@@ -758,8 +760,9 @@ static void parse_args(cli *c, int argc, char **argv) {
     } else if (!strcmp(a, "--balance")) {
       const char *v = NEXT();
       if (!strcmp(v, "area")) c->balance_random = 0;
+      else if (!strcmp(v, "random")) c->balance_random = 1, c->balance_seed = 1;
       else if (!strncmp(v, "random:", 7)) c->balance_random = 1, c->balance_seed = parse_seed(v + 7);
-      else die_usage("--balance must be 'area' or 'random:SEED', got '%s'", v);
+      else die_usage("--balance must be 'random', 'random:SEED' or 'area', got '%s'", v);
     } else if (!strcmp(a, "--camera")) parse_camera(c, NEXT());
     else if (!strcmp(a, "--emit")) parse_emit(c, NEXT());
     else if (!strcmp(a, "--size")) parse_size(c, NEXT());
