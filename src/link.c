@@ -772,7 +772,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       st = HR_ERR_NOMEM;
       goto fail;
     }
-    memcpy(s->links + s->nlinks, keep, (size_t)nkeep * sizeof *keep);
+    if (nkeep > 0) memcpy(s->links + s->nlinks, keep, (size_t)nkeep * sizeof *keep);
     s->nlinks += nkeep;
     free(keep);
     keep = NULL;

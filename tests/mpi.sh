@@ -14,6 +14,11 @@ if ! command -v mpirun >/dev/null; then
   exit 0
 fi
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+# Under the sanitizer build (make test-asan): Open MPI leaves its own allocations at
+# MPI_Finalize, some in plugins already unloaded (no module to suppress by), so leak checking is
+# off for these runs only; every other test checks hrad's leaks, and ASan still checks memory
+# errors here.
+export ASAN_OPTIONS="${ASAN_OPTIONS:-}${ASAN_OPTIONS:+:}detect_leaks=0"
 t=$(mktemp -d)
 trap 'rm -rf "$t"' EXIT
 fails=0 passes=0
