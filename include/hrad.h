@@ -243,12 +243,15 @@ void hr_solver_stats(const hr_solver *s, hr_stats *st);
 
 /* Writes the solver's state at an iteration boundary (from the iteration callback, or after
  * hr_solver_run) to 'path', atomically (PATH.tmp, then renamed). The file names elements and
- * links by global ids in a canonical order: it does not depend on the thread count (or, later,
- * on how elements are spread over processes). HR_ERR_IO with a message on a write failure. */
+ * links by global ids in a canonical order: it does not depend on the thread count, the number
+ * of ranks or the assignment. In a distributed run every rank calls it (a collective) and rank 0
+ * writes the file. HR_ERR_IO with a message on a write failure. */
 hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err);
 /* Loads a checkpoint into a solver just made by hr_solver_create for the same scene and
- * options; hr_solver_run then continues from it and ends with the result of an uninterrupted
- * run, bit for bit. Refused with a message (HR_ERR_INVALID) when the file was written for
+ * options (and given its ranks by hr_solver_set_dist, if distributed: every rank reads the file
+ * and keeps the links of its elements; any number of ranks may resume any checkpoint);
+ * hr_solver_run then continues from it and ends with the result of an uninterrupted run, bit
+ * for bit. Refused with a message (HR_ERR_INVALID) when the file was written for
  * another scene or other options, HR_ERR_PARSE when it is damaged. On any error the solver must
  * be destroyed. A checkpoint of a run that ended without converging (its max_iters, or its
  * callback) continues up to this solver's max_iters (not part of "the options"). */
@@ -263,6 +266,8 @@ void hr_dist_finish(hr_dist **d);       /* MPI_Finalize if hr_dist_start initial
 void hr_dist_abort(const hr_dist *d, int code); /* ends every rank (MPI_Abort); no-op for NULL */
 int hr_dist_rank(const hr_dist *d);     /* 0 for NULL */
 int hr_dist_size(const hr_dist *d);     /* 1 for NULL */
+/* 1 if 'flag' is non-zero on any rank: a collective (every rank calls it); 'flag' for NULL. */
+int hr_dist_any(const hr_dist *d, int flag);
 /* Spreads the solve over the ranks of 'd' (call on every rank, before hr_solver_run, with the
  * same scene, options and arguments). An element is owned by a rank, which holds the links it
  * receives. owner[i] is the rank of surface i's root; new elements belong to their parent's
@@ -271,8 +276,7 @@ int hr_dist_size(const hr_dist *d);     /* 1 for NULL */
  * (scatter, its gid): one surface's tree spread over every rank. Every rank then calls
  * hr_solver_run; each holds every element's radiosity afterwards (for outputs) but only its own
  * links. Results, counts and outputs are bit-identical to one process for any assignment.
- * HR_ERR_INVALID for a bad owner; checkpoints are not written or read with more than one rank
- * yet. */
+ * HR_ERR_INVALID for a bad owner. */
 hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uint64_t scatter,
                              hr_err *err);
 

@@ -12,6 +12,7 @@
  * of Figure 3, the elements, the links with their candidate lists, and a u64 checksum of all that
  * precedes it. A file is written to PATH.tmp and renamed into place, so a kill leaves the
  * previous checkpoint intact. */
+#include "mpi/dist.h"
 #include "solver_impl.h"
 #include "vec.h"
 
@@ -103,17 +104,81 @@ static int cmp_link_key(const void *a, const void *b) {
   return x[1] < y[1] ? -1 : x[1] > y[1];
 }
 
+/* This rank's live links as the file stores them (a link_rec, then ncand int32 candidates),
+ * into a fresh buffer of '*bytes' bytes; 0 when out of memory. */
+static int pack_links(const hr_solver *s, char **out, int64_t *bytes) {
+  int64_t nb = 0;
+  for (int64_t k = 0; k < s->nlinks; k++)
+    if (s->links[k].Fu >= 0)
+      nb += (int64_t)sizeof(link_rec) + 4 * (int64_t)(s->links[k].ncand > 0 ? s->links[k].ncand : 0);
+  char *b = malloc((size_t)(nb > 0 ? nb : 1));
+  if (!b) return 0;
+  int64_t o = 0;
+  for (int64_t k = 0; k < s->nlinks; k++) {
+    const hr_link *l = &s->links[k];
+    if (l->Fu < 0) continue;
+    link_rec r;
+    memset(&r, 0, sizeof r); /* no stray padding bytes in the file or its checksum */
+    r.r = s->el[l->r].gid, r.s = s->el[l->s].gid;
+    r.F = l->F, r.Fu = l->Fu, r.dF = l->dF, r.dS = l->dS, r.ncand = l->ncand;
+    memcpy(r.w, l->w, sizeof r.w);
+    memcpy(b + o, &r, sizeof r);
+    o += (int64_t)sizeof r;
+    if (l->ncand > 0) {
+      memcpy(b + o, s->pool + l->cand_off, (size_t)l->ncand * sizeof(int32_t));
+      o += 4 * (int64_t)l->ncand;
+    }
+  }
+  *out = b;
+  *bytes = nb;
+  return 1;
+}
+
+/* In a distributed run, every rank's packed links to rank 0 (the others keep nothing). A
+ * collective; the same status on every rank. */
+static hr_status gather_links(const hr_solver *s, char **buf, int64_t *bytes, hr_err *err) {
+  int64_t *sb = calloc((size_t)s->nranks, sizeof *sb), *rb = malloc((size_t)s->nranks * sizeof *rb);
+  hr_status st = sb && rb ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  if ((st = hr_dist_agree(s, st, err)) == HR_OK) {
+    sb[0] = *bytes;
+    void *all = NULL;
+    int64_t tot = 0;
+    st = hr_dist_alltoall(s->dist, *buf, sb, &all, &tot, rb);
+    if (st == HR_OK) {
+      free(*buf);
+      *buf = all;
+      *bytes = tot;
+    } else {
+      hr_err_set(err, st, "out of memory writing a checkpoint");
+    }
+  }
+  free(sb);
+  free(rb);
+  return st;
+}
+
 hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err) {
-  if (s->dist)
-    return hr_err_set(err, HR_ERR_INVALID,
-                      "checkpoints with more than one MPI rank are not supported yet");
   if (!s->started)
     return hr_err_set(err, HR_ERR_INVALID, "%s: nothing to save before the first iteration", path);
-  /* Canonical orders: (gid, idx) pairs for elements, (receiver gid, source gid, idx) for the
+  /* The links: this rank's, and in a distributed run everybody's on rank 0, which writes. */
+  char *lb = NULL;
+  int64_t lbytes = 0;
+  hr_status st = pack_links(s, &lb, &lbytes) ? HR_OK : hr_err_set(err, HR_ERR_NOMEM,
+                                                                  "out of memory writing %s", path);
+  if (s->dist && (st = hr_dist_agree(s, st, err)) == HR_OK) st = gather_links(s, &lb, &lbytes, err);
+  if (st != HR_OK || s->rank != 0) {
+    free(lb);
+    return st;
+  }
+  /* Canonical orders: (gid, idx) pairs for elements, (receiver gid, source gid, offset) for the
    * live links. */
-  uint64_t(*ek)[2] = malloc((size_t)s->nel * sizeof *ek);
   int64_t nl = 0;
-  for (int64_t k = 0; k < s->nlinks; k++) nl += s->links[k].Fu >= 0;
+  for (int64_t o = 0; o < lbytes; nl++) {
+    link_rec r;
+    memcpy(&r, lb + o, sizeof r);
+    o += (int64_t)sizeof r + 4 * (int64_t)(r.ncand > 0 ? r.ncand : 0);
+  }
+  uint64_t(*ek)[2] = malloc((size_t)s->nel * sizeof *ek);
   uint64_t(*lk)[3] = malloc((size_t)(nl > 0 ? nl : 1) * sizeof *lk);
   char tmp[4200];
   snprintf(tmp, sizeof tmp, "%s.tmp", path);
@@ -121,20 +186,23 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
   if (!ek || !lk) {
     free(ek);
     free(lk);
+    free(lb);
     return hr_err_set(err, HR_ERR_NOMEM, "out of memory writing %s", path);
   }
   for (int64_t e = 0; e < s->nel; e++) ek[e][0] = s->el[e].gid, ek[e][1] = (uint64_t)e;
   qsort(ek, (size_t)s->nel, sizeof *ek, cmp_u64_idx);
-  for (int64_t k = 0, i = 0; k < s->nlinks; k++)
-    if (s->links[k].Fu >= 0) {
-      lk[i][0] = s->el[s->links[k].r].gid, lk[i][1] = s->el[s->links[k].s].gid;
-      lk[i++][2] = (uint64_t)k;
-    }
+  for (int64_t o = 0, i = 0; o < lbytes; i++) {
+    link_rec r;
+    memcpy(&r, lb + o, sizeof r);
+    lk[i][0] = r.r, lk[i][1] = r.s, lk[i][2] = (uint64_t)o;
+    o += (int64_t)sizeof r + 4 * (int64_t)(r.ncand > 0 ? r.ncand : 0);
+  }
   qsort(lk, (size_t)nl, sizeof *lk, cmp_link_key);
   w.f = fopen(tmp, "wb");
   if (!w.f) {
     free(ek);
     free(lk);
+    free(lb);
     return hr_err_set(err, HR_ERR_IO, "%s: cannot write: %s", tmp, strerror(errno));
   }
   const uint32_t version = VERSION;
@@ -143,9 +211,12 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
   put(&w, &version, sizeof version);
   put(&w, &hs, sizeof hs);
   put(&w, &ho, sizeof ho);
+  /* counts over all ranks */
+  const int64_t rays = s->dist ? s->g_rays : s->rays;
+  const int64_t init = s->dist ? s->g_initial : s->initial_links;
   progress pr = {s->iterations, s->converged, s->done,  s->stopped,
                  s->bf_e,       s->unit,      s->prev_change, s->prev_abs,
-                 s->stall,      s->rays,      s->initial_links, s->t};
+                 s->stall,      rays,         init,           s->t};
   put(&w, &pr, sizeof pr);
   put(&w, &s->nel, sizeof s->nel);
   for (int64_t i = 0; i < s->nel; i++) {
@@ -159,16 +230,16 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
   }
   put(&w, &nl, sizeof nl);
   for (int64_t i = 0; i < nl; i++) {
-    const hr_link *l = &s->links[lk[i][2]];
-    link_rec r = {lk[i][0], lk[i][1], l->F, l->Fu, l->dF, l->dS, {0}, l->ncand};
-    memcpy(r.w, l->w, sizeof r.w);
+    link_rec r;
+    memcpy(&r, lb + lk[i][2], sizeof r);
     put(&w, &r, sizeof r);
-    if (l->ncand > 0) put(&w, s->pool + l->cand_off, (size_t)l->ncand * sizeof(int32_t));
+    if (r.ncand > 0) put(&w, lb + lk[i][2] + sizeof r, (size_t)r.ncand * sizeof(int32_t));
   }
   const uint64_t sum = w.h;
   put(&w, &sum, sizeof sum);
   free(ek);
   free(lk);
+  free(lb);
   int bad = w.bad || fflush(w.f) != 0 || ferror(w.f);
   if (fclose(w.f) != 0) bad = 1;
   if (bad || rename(tmp, path) != 0) {
@@ -194,6 +265,16 @@ static void get(reader *r, void *out, size_t n) {
     return;
   }
   memcpy(out, r->p, n);
+  r->h = hash_bytes(r->h, r->p, n);
+  r->p += n;
+}
+
+/* Reads past n bytes as get() would read them: one piece of the checksum. */
+static void skip(reader *r, size_t n) {
+  if (r->bad || (size_t)(r->end - r->p) < n) {
+    r->bad = 1;
+    return;
+  }
   r->h = hash_bytes(r->h, r->p, n);
   r->p += n;
 }
@@ -327,6 +408,7 @@ static int read_links(hr_solver *s, reader *r, const gid_map *m, const char *pat
   s->links = malloc((size_t)(n > 0 ? n : 1) * sizeof *s->links);
   if (!s->links) return -1;
   s->cap_links = n > 0 ? n : 1;
+  s->nlinks = 0;
   for (int64_t i = 0; i < n; i++) {
     link_rec lr;
     get(r, &lr, sizeof lr);
@@ -336,7 +418,11 @@ static int read_links(hr_solver *s, reader *r, const gid_map *m, const char *pat
       hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (link %lld)", path, (long long)i);
       return 0;
     }
-    hr_link *l = &s->links[i];
+    if (!hr_owns(s, ri)) { /* another rank's: read past it (the checksum covers it) */
+      if (lr.ncand > 0) skip(r, (size_t)lr.ncand * sizeof(int32_t));
+      continue;
+    }
+    hr_link *l = &s->links[s->nlinks];
     *l = (hr_link){.r = ri, .s = si, .F = lr.F, .Fu = lr.Fu, .dF = lr.dF, .dS = lr.dS,
                    .cand_off = 0, .ncand = lr.ncand};
     memcpy(l->w, lr.w, sizeof l->w);
@@ -355,7 +441,7 @@ static int read_links(hr_solver *s, reader *r, const gid_map *m, const char *pat
       l->cand_off = (uint32_t)s->npool;
       s->npool += lr.ncand;
     }
-    s->nlinks = i + 1;
+    s->nlinks++;
   }
   if (r->bad) {
     hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (links)", path);
@@ -364,10 +450,21 @@ static int read_links(hr_solver *s, reader *r, const gid_map *m, const char *pat
   return 1;
 }
 
+static hr_status resume(hr_solver *s, const char *path, hr_err *err);
+
 hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err) {
-  if (s->dist)
-    return hr_err_set(err, HR_ERR_INVALID,
-                      "checkpoints with more than one MPI rank are not supported yet");
+  hr_status st = resume(s, path, err);
+  if (!s->dist) return st;
+  /* every rank read the same file: only a local failure (memory) can differ */
+  if ((st = hr_dist_agree(s, st, err)) != HR_OK) return st;
+  /* the file's counts are totals over the ranks: rank 0 carries them */
+  if (s->rank != 0) s->rays = 0, s->initial_links = 0;
+  hr_solver_sync_counts(s);
+  return HR_OK;
+}
+
+/* hr_solver_resume on this rank: elements, state, and the links of the elements it owns. */
+static hr_status resume(hr_solver *s, const char *path, hr_err *err) {
   if (s->started || s->nel != s->scene->nsurfs)
     return hr_err_set(err, HR_ERR_INVALID, "%s: resume needs a solver that has not run", path);
   size_t len = 0;

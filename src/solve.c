@@ -305,7 +305,7 @@ static hr_status sync_gathered(hr_solver *s, hr_err *err) {
 }
 
 /* The counts reported (links, rays) over all ranks. */
-static void sync_counts(hr_solver *s) {
+void hr_solver_sync_counts(hr_solver *s) {
   int64_t v[3] = {s->nlinks - s->ndead, s->rays, s->initial_links};
   hr_dist_sum_i64(s->dist, v, 3);
   s->g_links = v[0], s->g_rays = v[1], s->g_initial = v[2];
@@ -500,7 +500,7 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
   if ((st = sync_gathered(s, err)) != HR_OK) return st;
   double tc = hr_now();
   double abs = push_pull_all(s);
-  sync_counts(s);
+  hr_solver_sync_counts(s);
   *change = abs / s->unit;
   if ((st = check_physical(s, err)) != HR_OK) return st;
   if ((st = check_contracting(s, abs, *nnew, err)) != HR_OK) return st;
@@ -564,7 +564,7 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     const double t0 = hr_now();
     hr_elem_open(s, 0, s->nel);
     if ((st = hr_link_init(s, err)) != HR_OK) return st;
-    sync_counts(s);
+    hr_solver_sync_counts(s);
     s->t.init_graph = hr_now() - t0;
     s->bf_e = s->opt.bf_start;
     s->converged = 0;

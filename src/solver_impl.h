@@ -143,6 +143,8 @@ int32_t hr_elem_owner(const hr_solver *s, int64_t e, int64_t parent);
 /* Makes every rank see a failure of any: returns 'st' where this rank failed, HR_ERR_REMOTE
  * (with a message) where another did, HR_OK where none did. A collective in distributed runs. */
 hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err);
+/* The reported counts (links, rays, initial links) summed over the ranks: a collective. */
+void hr_solver_sync_counts(hr_solver *s);
 
 /* elem.c */
 hr_status hr_elem_init(hr_solver *s);                  /* one root per surface, idx == surface */

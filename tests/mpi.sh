@@ -85,10 +85,31 @@ rc=$?
 [ $rc -ne 0 ] && [ "$(grep -c '^hrad:' "$t/err")" = 1 ] && grep -q "bad.obj:3: vertex index 9 out of range" "$t/err" \
   && [ ! -e "$t/y" ] && ok "bad input on 3 ranks: one line, exit $rc" \
   || { bad "bad input on 3 ranks: exit $rc"; cat "$t/err"; }
-mpi 2 --quiet --checkpoint "$t/ck" -o "$t/y" cornell 2> "$t/err"
-rc=$?
-[ $rc -ne 0 ] && grep -q "^hrad: --checkpoint and --resume do not work with more than one MPI rank" "$t/err" \
-  && ok "--checkpoint on 2 ranks refused (exit $rc)" || { bad "--checkpoint on 2 ranks: exit $rc"; cat "$t/err"; }
+
+# ---------------------------------------------------------------- checkpoints across P
+# Written by P ranks, resumed on any other P (and on one process), the result is bit-identical;
+# also after a kill -9 of the whole job at a random moment.
+mpi 3 "${q[@]}" --threads 1 --max-iters 6 --checkpoint "$t/k3.ckpt" -o "$t/k3" cornell
+for np in 1 2; do
+  if [ "$np" = 1 ]; then "$hrad" "${q[@]}" --resume "$t/k3.ckpt" -o "$t/k3r$np" cornell
+  else mpi "$np" "${q[@]}" --threads 1 --resume "$t/k3.ckpt" -o "$t/k3r$np" cornell; fi
+  same "$t/c1" "$t/k3r$np" cornell "checkpoint of 3 ranks after iteration 6, resumed on $np"
+done
+"$hrad" "${q[@]}" --max-iters 5 --checkpoint "$t/k1.ckpt" -o "$t/k1" cornell
+mpi 4 "${q[@]}" --threads 1 --resume "$t/k1.ckpt" -o "$t/k1r4" cornell \
+  && same "$t/c1" "$t/k1r4" cornell "checkpoint of 1 process after iteration 5, resumed on 4 ranks" \
+  || bad "resume on 4 ranks: exit $?"
+( exec mpirun -np 3 --bind-to none "$hrad" --size 96x72 --bf-low 3e-3 --threads 1 \
+    --checkpoint "$t/kk.ckpt" --checkpoint-every 0 -o "$t/kk" cornell > /dev/null 2>&1 ) &
+pid=$!
+for _ in $(seq 1000); do [ -e "$t/kk.ckpt" ] && break; sleep 0.01; done
+sleep "0.$((RANDOM % 5))"
+kill -KILL $pid 2>/dev/null
+wait $pid 2>/dev/null
+pkill -KILL -f "$hrad --size 96x72 --bf-low 3e-3 --threads 1 --checkpoint $t/kk.ckpt" 2>/dev/null
+mpi 2 --size 96x72 --bf-low 3e-3 --threads 1 --resume "$t/kk.ckpt" -o "$t/kkr" cornell 2> "$t/err" >/dev/null
+it=$(grep -o 'after iteration [0-9]*' "$t/err")
+same "$t/c1" "$t/kkr" cornell "3-rank job killed (kill -9), resumed on 2 ranks $it"
 mpi 2 --quiet --balance nonsense -o "$t/y" cornell 2> "$t/err"
 [ "$(grep -c "^hrad: --balance must be" "$t/err")" = 1 ] && ok "--balance nonsense: one usage line" \
   || { bad "--balance nonsense"; cat "$t/err"; }

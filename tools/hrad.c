@@ -90,7 +90,8 @@ typedef struct cli {
   const char *ckpt;      /* --checkpoint FILE (NULL: none) */
   double ckpt_every;     /* --checkpoint-every S: seconds between checkpoints */
   double ckpt_last;      /* when the last one was written (or the solve began) */
-  int ckpt_iter;         /* the iteration it holds (0: none written) */
+  int ckpt_iter;         /* the iteration last saved, or tried (0: none) */
+  int ckpt_ok;           /* that save succeeded */
   const char *resume;    /* --resume FILE (NULL: none) */
   int64_t verify_paths; /* --verify N: path-traced reference per polygon (0 = off) */
   int verify_spp;       /* --verify-image SPP: path-traced reference image (0 = off) */
@@ -770,8 +771,6 @@ static void parse_args(cli *c, int argc, char **argv) {
 #undef NEXT
   }
   if (!c->scene_arg) c->scene_arg = "room";
-  if (hr_dist_size(g_dist) > 1 && (c->ckpt || c->resume))
-    die_usage("--checkpoint and --resume do not work with more than one MPI rank yet");
   check_ckpt_paths(c);
   /* the checks of hr_solver_create that relate two options, with its messages */
   if (!(o->bf_start >= o->bf_low))
@@ -1444,14 +1443,15 @@ static void verify_image(cli *c, const hr_solver *s) {
 
 /* Writes the checkpoint (state after iteration 'iter'); a failure is a warning, the run goes
  * on. */
+/* Writes the checkpoint: with MPI, every rank calls it (rank 0 writes the file). A failure is a
+ * warning; the run goes on, and does not try again at the end. */
 static void save_ckpt(cli *c, const hr_solver *s, int iter) {
   hr_err err = {{0}};
-  if (hr_solver_checkpoint(s, c->ckpt, &err) != HR_OK) {
-    fprintf(stderr, "hrad: warning: checkpoint not written: %s\n", err.msg);
-    return;
-  }
   c->ckpt_last = now_s();
-  c->ckpt_iter = iter;
+  c->ckpt_iter = iter; /* the same on every rank, written or not */
+  c->ckpt_ok = hr_solver_checkpoint(s, c->ckpt, &err) == HR_OK;
+  if (!c->ckpt_ok && g_rank == 0)
+    fprintf(stderr, "hrad: warning: checkpoint not written: %s\n", err.msg);
 }
 
 static int on_iter(void *ud, const hr_solver *s, const hr_iter_info *it) {
@@ -1461,18 +1461,22 @@ static int on_iter(void *ud, const hr_solver *s, const hr_iter_info *it) {
             "iter %3d  BF_e %.3e  elements %9lld  links %10lld  max change %.3e  %8.3f s\n",
             it->iter, it->bf_e, (long long)it->elements, (long long)it->links, it->max_change,
             it->elapsed_s);
-  if (atomic_load(&g_stop)) {
+  /* with MPI, every rank decides alike: a signal seen by any rank, rank 0's clock */
+  const int stop = hr_dist_any(g_dist, atomic_load(&g_stop) != 0);
+  if (stop) {
     if (c->ckpt) {
       save_ckpt(c, s, it->iter);
-      if (c->ckpt_iter == it->iter)
+      if (c->ckpt_ok && g_rank == 0)
         fprintf(stderr, "hrad: saved iteration %d to %s; continue with --resume %s\n", it->iter,
                 c->ckpt, c->ckpt);
     }
     return 1;
   }
-  if (c->ckpt && now_s() - c->ckpt_last >= c->ckpt_every) save_ckpt(c, s, it->iter);
+  if (c->ckpt &&
+      hr_dist_any(g_dist, g_rank == 0 && now_s() - c->ckpt_last >= c->ckpt_every))
+    save_ckpt(c, s, it->iter);
   if (c->snapshots) snapshot(c, s, it->iter);
-  return atomic_load(&g_stop) != 0;
+  return hr_dist_any(g_dist, atomic_load(&g_stop) != 0);
 }
 
 static int is_builtin(const char *name) {
@@ -1620,6 +1624,11 @@ int main(int argc, char **argv) {
       ranks = NULL;
     }
   }
+  if (st == HR_OK && c.ckpt) { /* the final state (every rank takes part) */
+    hr_stats es;
+    hr_solver_stats(s, &es);
+    if (c.ckpt_iter != es.iterations) save_ckpt(&c, s, es.iterations);
+  }
   if (g_rank != 0) { /* its part is done: rank 0 writes the outputs */
     if (st != HR_OK) check(st, &err);
     hr_solver_destroy(&s);
@@ -1629,11 +1638,6 @@ int main(int argc, char **argv) {
   g_together = 0;
   check_stop(&c);
   check(st, &err);
-  if (c.ckpt) {
-    hr_stats es;
-    hr_solver_stats(s, &es);
-    if (c.ckpt_iter != es.iterations) save_ckpt(&c, s, es.iterations);
-  }
   check_finite(&c, s);
   check_lit(&c, s);
   char path[sizeof c.stage + 300], name[PATH_MAX];

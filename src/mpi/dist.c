@@ -94,6 +94,12 @@ static void allreduce(const hr_dist *d, void *v, int64_t n, MPI_Datatype t, size
   count((hr_dist *)d, n * (int64_t)sz, t0);
 }
 
+int hr_dist_any(const hr_dist *d, int flag) {
+  int64_t v = flag != 0;
+  hr_dist_max_i64(d, &v, 1);
+  return v != 0;
+}
+
 void hr_dist_counters(const hr_dist *d, int64_t *calls, int64_t *bytes, double *secs) {
   *calls = d ? d->calls : 0;
   *bytes = d ? d->bytes : 0;
