@@ -21,6 +21,7 @@
  * paper's table 2 time for "floor" when given) and a current cluster (10 GB/s, 2 us, this
  * machine's processor speed). The assumptions are stated in BENCHMARKS.md. */
 #include "hrad.h"
+#include "partition/partition.h"
 #include "solver_impl.h"
 
 #include <math.h>
@@ -51,25 +52,11 @@ static void assign(const hr_solver *s, int P, int random, int32_t *own) {
                          (uint64_t)P);
     return;
   }
-  int32_t *ord = malloc((size_t)n * sizeof *ord);
-  double *load = calloc((size_t)P, sizeof *load);
-  for (int i = 0; i < n; i++) ord[i] = i;
-  for (int i = 1; i < n; i++) {
-    int32_t t = ord[i];
-    int j = i;
-    for (; j > 0 && s->scene->surfs[ord[j - 1]].area < s->scene->surfs[t].area; j--)
-      ord[j] = ord[j - 1];
-    ord[j] = t;
-  }
-  for (int i = 0; i < n; i++) {
-    int best = 0;
-    for (int p = 1; p < P; p++) best = load[p] < load[best] ? p : best;
-    own[ord[i]] = best;
-    load[best] += s->scene->surfs[ord[i]].area;
-  }
+  double *area = malloc((size_t)n * sizeof *area);
+  for (int i = 0; i < n; i++) area[i] = s->scene->surfs[i].area;
+  hr_partition_greedy(area, n, P, own);
+  free(area);
   for (int64_t e = n; e < s->nel; e++) own[e] = own[s->el[e].parent];
-  free(ord);
-  free(load);
 }
 
 /* Time of the collectives at P ranks on machine m; 'routed' links of 'lbytes' bytes each move

@@ -291,6 +291,8 @@ typedef struct hr_rank_stats {
   int64_t mpi_bytes;     /* bytes it sent in them */
   double busy_s;         /* solve time outside MPI */
   double mpi_s;          /* time inside MPI, waiting for the slowest rank included */
+  double phase_busy[4];  /* per phase (init graph, refine, gather, push-pull): outside MPI */
+  double phase_mpi[4];   /* and inside it */
   double peak_rss_mb;
 } hr_rank_stats;
 /* Every rank's share after hr_solver_run: a collective (every rank calls it); rank 0 gets

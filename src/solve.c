@@ -7,6 +7,7 @@
  * sums over a receiver's links in a fixed order, so results do not depend on thread count or
  * scheduling. */
 #include "mpi/dist.h"
+#include "partition/partition.h"
 #include "solver_impl.h"
 #include "vec.h"
 
@@ -353,30 +354,15 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uin
   } else {
     /* by area, largest first (ties by index), each to the rank with the least so far: the
      * work of a surface's tree grows with its area over A_e */
-    int32_t *ord = malloc((size_t)n * sizeof *ord);
-    double *load = calloc((size_t)P, sizeof *load);
-    if (!ord || !load) {
-      free(ord);
-      free(load);
+    double *area = malloc((size_t)n * sizeof *area);
+    int ok = area != NULL;
+    for (int i = 0; ok && i < n; i++) area[i] = s->scene->surfs[i].area;
+    ok = ok && hr_partition_greedy(area, n, P, s->eown);
+    free(area);
+    if (!ok) {
       s->dist = NULL;
       return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
     }
-    for (int i = 0; i < n; i++) ord[i] = i;
-    for (int i = 1; i < n; i++) { /* insertion sort: surfaces are few here (< 1e4) */
-      int32_t t = ord[i];
-      int j = i;
-      for (; j > 0 && s->scene->surfs[ord[j - 1]].area < s->scene->surfs[t].area; j--)
-        ord[j] = ord[j - 1];
-      ord[j] = t;
-    }
-    for (int i = 0; i < n; i++) {
-      int best = 0;
-      for (int p = 1; p < P; p++) best = load[p] < load[best] ? p : best;
-      s->eown[ord[i]] = best;
-      load[best] += s->scene->surfs[ord[i]].area;
-    }
-    free(ord);
-    free(load);
   }
   const char *tf = getenv("HRAD_TEST_FAIL");
   if (tf) {
@@ -465,6 +451,14 @@ static void update_unit(hr_solver *s) {
 }
 
 
+/* Seconds this rank spent inside MPI so far (0 in one process). */
+static double mpi_secs(const hr_solver *s) {
+  int64_t c, b;
+  double t;
+  hr_dist_counters(s->dist, &c, &b, &t);
+  return t;
+}
+
 static int64_t count_leaves(const hr_solver *s) {
   int64_t n = 0;
   for (int64_t e = 0; e < s->nel; e++) n += s->el[e].child < 0;
@@ -488,17 +482,17 @@ static hr_status prepare(hr_solver *s, hr_err *err) {
  * Returns the largest change of B relative to the radiosity unit and the new links. */
 static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *err) {
   hr_status st;
-  double ta = hr_now();
+  double ta = hr_now(), ma = mpi_secs(s);
   *nnew = 0;
   if (s->iterations > 0 && (st = hr_link_refine(s, s->bf_e, nnew, err)) != HR_OK) return st;
   st = hr_link_sort(s);
   if ((st = hr_dist_agree(s, st == HR_OK ? st : hr_err_set(err, st, "out of memory"), err)))
     return st;
   hr_dist_sum_i64(s->dist, nnew, 1);
-  double tb = hr_now();
+  double tb = hr_now(), mb = mpi_secs(s);
   gather(s);
   if ((st = sync_gathered(s, err)) != HR_OK) return st;
-  double tc = hr_now();
+  double tc = hr_now(), mc = mpi_secs(s);
   double abs = push_pull_all(s);
   hr_solver_sync_counts(s);
   *change = abs / s->unit;
@@ -506,6 +500,7 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
   if ((st = check_contracting(s, abs, *nnew, err)) != HR_OK) return st;
   update_unit(s);
   double td = hr_now();
+  s->mpi_t[1] += mb - ma, s->mpi_t[2] += mc - mb, s->mpi_t[3] += mpi_secs(s) - mc;
   s->t.refine += tb - ta;
   s->t.gather += tc - tb;
   s->t.push_pull += td - tc;
@@ -561,11 +556,12 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
   s->t_start = hr_now() - s->t.total; /* a resumed run goes on counting */
   if ((st = prepare(s, err)) != HR_OK) return st;
   if (!s->started) {
-    const double t0 = hr_now();
+    const double t0 = hr_now(), m0 = mpi_secs(s);
     hr_elem_open(s, 0, s->nel);
     if ((st = hr_link_init(s, err)) != HR_OK) return st;
     hr_solver_sync_counts(s);
     s->t.init_graph = hr_now() - t0;
+    s->mpi_t[0] = mpi_secs(s) - m0;
     s->bf_e = s->opt.bf_start;
     s->converged = 0;
     s->started = 1;
@@ -620,6 +616,8 @@ hr_status hr_solver_rank_stats(const hr_solver *s, hr_rank_stats *all, hr_err *e
   me.rays = s->rays;
   hr_dist_counters(s->dist, &me.mpi_calls, &me.mpi_bytes, &me.mpi_s);
   me.busy_s = s->t.total - me.mpi_s;
+  const double ph[4] = {s->t.init_graph, s->t.refine, s->t.gather, s->t.push_pull};
+  for (int k = 0; k < 4; k++) me.phase_mpi[k] = s->mpi_t[k], me.phase_busy[k] = ph[k] - s->mpi_t[k];
   struct rusage ru;
   if (getrusage(RUSAGE_SELF, &ru) == 0) me.peak_rss_mb = (double)ru.ru_maxrss / 1024.0;
   if (hr_dist_gather(s->dist, &me, sizeof me, all) != HR_OK)

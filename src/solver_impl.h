@@ -121,6 +121,7 @@ struct hr_solver {
   uint64_t scatter;   /* non-zero: every new element goes to a rank drawn from (scatter, gid) */
   int rank, nranks;
   int64_t g_links, g_rays, g_initial; /* over all ranks (= the local counts in one process) */
+  double mpi_t[4];    /* seconds inside MPI per phase: init graph, refine, gather, push-pull */
   /* Test hook (HRAD_TEST_FAIL=RANK:PHASE:ITER, read by hr_solver_set_dist): rank 'fail_rank'
    * fails with "out of memory" in phase fail_phase (HR_PHASE_*) of iteration fail_iter. */
   int fail_rank, fail_phase, fail_iter;

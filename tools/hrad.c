@@ -1514,6 +1514,20 @@ static void print_ranks(const hr_rank_stats *r, int n) {
   }
   fprintf(stderr, "imbalance (max/mean busy) %.2f, links max/mean %.2f\n",
           sum[4] > 0 ? hi[4] / (sum[4] / n) : 1, sum[1] > 0 ? hi[1] / (sum[1] / n) : 1);
+  /* per phase: busy and MPI (idle included) seconds, min/mean/max over the ranks */
+  static const char *const ph[4] = {"init graph", "refine", "gather", "push-pull"};
+  fprintf(stderr, "phase         busy min   mean    max    mpi min   mean    max\n");
+  for (int k = 0; k < 4; k++) {
+    double b[3] = {INFINITY, 0, -INFINITY}, m[3] = {INFINITY, 0, -INFINITY};
+    for (int i = 0; i < n; i++) {
+      b[0] = fmin(b[0], r[i].phase_busy[k]), b[1] += r[i].phase_busy[k] / n;
+      b[2] = fmax(b[2], r[i].phase_busy[k]);
+      m[0] = fmin(m[0], r[i].phase_mpi[k]), m[1] += r[i].phase_mpi[k] / n;
+      m[2] = fmax(m[2], r[i].phase_mpi[k]);
+    }
+    fprintf(stderr, "%-12s %8.3f %6.3f %6.3f   %8.3f %6.3f %6.3f\n", ph[k], b[0], b[1], b[2], m[0],
+            m[1], m[2]);
+  }
 }
 
 /* "hrad: wrote DIR/{a,b,...}" and the number of snapshots. */
