@@ -280,6 +280,14 @@ int hr_dist_any(const hr_dist *d, int flag);
 hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uint64_t scatter,
                              hr_err *err);
 
+/* Moves every element to rank owner[e] (indexed like the solver's elements, the same array on
+ * every rank; hr_solver_elements gives their count) with the links it receives, between
+ * iterations: a collective. The result of the run does not change (graph balancing, paper
+ * 2.2.5, uses it). HR_ERR_INVALID for a bad owner or a solver that is not distributed. */
+hr_status hr_solver_migrate(hr_solver *s, const int32_t *owner, hr_err *err);
+/* How many elements (all nodes of all trees) the solver holds now. */
+int64_t hr_solver_elements(const hr_solver *s);
+
 /* One rank's share of a distributed run (hr_solver_rank_stats). */
 typedef struct hr_rank_stats {
   int rank;

@@ -447,6 +447,9 @@ static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uin
  * appended in rank order (order does not matter: see send_to_owners). A collective: 'st' is
  * this rank's status so far, and every rank returns the same status (a pool that cannot hold the
  * received lists fails locally, and the next collective tells the others). */
+/* Candidates a link carries: none until its list is built (NO_LIST). */
+static int32_t ncands(const hr_link *l) { return l->ncand > 0 ? l->ncand : 0; }
+
 static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_status st,
                              hr_err *err) {
   if ((st = hr_dist_agree(s, st, err)) != HR_OK) return st;
@@ -459,7 +462,7 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
   if (sb && rb && at) {
     for (int64_t i = 0; i < n; i++) {
       const int d = s->eown[cur[i].r];
-      if (d != s->rank) sb[d] += (int64_t)sizeof(hr_link) + 4 * (int64_t)cur[i].ncand;
+      if (d != s->rank) sb[d] += (int64_t)sizeof(hr_link) + 4 * (int64_t)ncands(&cur[i]);
     }
     for (int p = 0; p < P; p++) at[p + 1] = at[p] + sb[p];
     out = malloc((size_t)(at[P] > 0 ? at[P] : 1));
@@ -477,7 +480,7 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
     }
     memcpy(out + at[d], &cur[i], sizeof(hr_link));
     at[d] += (int64_t)sizeof(hr_link);
-    const size_t cb = 4 * (size_t)cur[i].ncand;
+    const size_t cb = 4 * (size_t)ncands(&cur[i]);
     if (cb) memcpy(out + at[d], s->pool + cur[i].cand_off, cb);
     at[d] += (int64_t)cb;
   }
@@ -491,8 +494,8 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
   for (int64_t o = 0; o < tot; nr++) {
     hr_link l;
     memcpy(&l, (char *)recv + o, sizeof l);
-    o += (int64_t)sizeof l + 4 * (int64_t)l.ncand;
-    nc += l.ncand;
+    o += (int64_t)sizeof l + 4 * (int64_t)ncands(&l);
+    nc += ncands(&l);
   }
   hr_link *grown = realloc(cur, (size_t)(nstay + nr > 0 ? nstay + nr : 1) * sizeof *grown);
   if (!grown || s->npool + nc > POOL_MAX ||
@@ -507,16 +510,33 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
   for (int64_t o = 0, k = nstay; o < tot; k++) {
     memcpy(&cur[k], (char *)recv + o, sizeof(hr_link));
     o += (int64_t)sizeof(hr_link);
-    const size_t cb = 4 * (size_t)cur[k].ncand;
+    const size_t cb = 4 * (size_t)ncands(&cur[k]);
     cur[k].cand_off = (uint32_t)s->npool;
     if (cb) memcpy(s->pool + s->npool, (char *)recv + o, cb);
-    s->npool += cur[k].ncand;
+    s->npool += ncands(&cur[k]);
     o += (int64_t)cb;
   }
   free(recv);
   *pcur = cur;
   *pn = nstay + nr;
   return HR_OK;
+}
+
+/* Moves links to the owners of their receivers after s->eown changed (hr_solver_migrate): the
+ * dead ones are dropped, the others routed; the next hr_link_sort groups them afresh. A
+ * collective. */
+hr_status hr_link_migrate(hr_solver *s, hr_err *err) {
+  int64_t n = 0;
+  for (int64_t i = 0; i < s->nlinks; i++)
+    if (s->links[i].Fu >= 0) s->links[n++] = s->links[i];
+  hr_link *cur = s->links;
+  s->links = NULL;
+  hr_status st = route_links(s, &cur, &n, HR_OK, err);
+  s->links = cur;
+  s->nlinks = s->cap_links = n;
+  s->ndead = s->nsorted = 0;
+  s->sorted = 0;
+  return st;
 }
 
 /* Subdivides the elements marked in mark[0, n) in increasing idx, so that element indices do not

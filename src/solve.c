@@ -364,6 +364,8 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uin
       return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
     }
   }
+  const char *tm = getenv("HRAD_TEST_MIGRATE");
+  if (tm) s->migrate_seed = strtoull(tm, NULL, 10);
   const char *tf = getenv("HRAD_TEST_FAIL");
   if (tf) {
     static const char *const names[] = {"", "init", "refine", "push-pull"};
@@ -550,6 +552,8 @@ static void advance(hr_solver *s, double change, int64_t nnew, int stop) {
   if (stop || s->iterations >= o->max_iters) s->done = 1;
 }
 
+static hr_status test_migrate(hr_solver *s, hr_err *err);
+
 hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
   hr_status st;
   omp_set_num_threads(s->threads);
@@ -572,6 +576,7 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     int64_t nnew = 0;
     if ((st = iterate(s, &change, &nnew, err)) != HR_OK) return st;
     advance(s, change, nnew, 0);
+    if (s->migrate_seed && !s->done && (st = test_migrate(s, err)) != HR_OK) return st;
     s->t.total = hr_now() - s->t_start;
     /* Display ({15}) and checkpoints: the state is complete here, and s->bf_e is already the
      * next iteration's. */
@@ -604,6 +609,38 @@ void hr_solver_stats(const hr_solver *s, hr_stats *st) {
   struct rusage ru;
   if (getrusage(RUSAGE_SELF, &ru) == 0) st->peak_rss_mb = (double)ru.ru_maxrss / 1024.0;
   st->time_s = s->t;
+}
+
+int64_t hr_solver_elements(const hr_solver *s) { return s->nel; }
+
+hr_status hr_solver_migrate(hr_solver *s, const int32_t *owner, hr_err *err) {
+  if (!s->dist) return hr_err_set(err, HR_ERR_INVALID, "hr_solver_migrate: not distributed");
+  int bad = 0;
+  for (int64_t e = 0; e < s->nel; e++) bad |= owner[e] < 0 || owner[e] >= s->nranks;
+  if (hr_dist_any(s->dist, bad))
+    return hr_err_set(err, HR_ERR_INVALID, "hr_solver_migrate: an owner is not a rank");
+  memcpy(s->eown, owner, (size_t)s->nel * sizeof *owner);
+  return hr_link_migrate(s, err);
+}
+
+/* The test hook HRAD_TEST_MIGRATE=SEED: after every iteration, every element to a rank drawn
+ * from (SEED, the iteration, its gid). */
+static hr_status test_migrate(hr_solver *s, hr_err *err) {
+  int32_t *own = malloc((size_t)s->nel * sizeof *own);
+  hr_status st = hr_dist_agree(s, own ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory"),
+                               err);
+  if (st == HR_OK) {
+    for (int64_t e = 0; e < s->nel; e++) {
+      uint64_t z = (s->migrate_seed + (uint64_t)s->iterations * UINT64_C(0x632be59bd9b4e019)) ^
+                   (s->el[e].gid * UINT64_C(0x9e3779b97f4a7c15));
+      z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
+      z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
+      own[e] = (int32_t)((z ^ (z >> 31)) % (uint64_t)s->nranks);
+    }
+    st = hr_solver_migrate(s, own, err);
+  }
+  free(own);
+  return st;
 }
 
 hr_status hr_solver_rank_stats(const hr_solver *s, hr_rank_stats *all, hr_err *err) {

@@ -122,6 +122,7 @@ struct hr_solver {
   int rank, nranks;
   int64_t g_links, g_rays, g_initial; /* over all ranks (= the local counts in one process) */
   double mpi_t[4];    /* seconds inside MPI per phase: init graph, refine, gather, push-pull */
+  uint64_t migrate_seed; /* test hook HRAD_TEST_MIGRATE=SEED: new random owners every iteration */
   /* Test hook (HRAD_TEST_FAIL=RANK:PHASE:ITER, read by hr_solver_set_dist): rank 'fail_rank'
    * fails with "out of memory" in phase fail_phase (HR_PHASE_*) of iteration fail_iter. */
   int fail_rank, fail_phase, fail_iter;
@@ -169,6 +170,7 @@ hr_status hr_link_init(hr_solver *s, hr_err *err);          /* paper 2.2.1 */
 /* One refinement pass at threshold 'bf_e' (relative); returns new link count through 'nnew'. */
 hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err); /* 2.2.2 */
 hr_status hr_link_sort(hr_solver *s); /* groups links by receiver (rstart, xstart/xidx) */
+hr_status hr_link_migrate(hr_solver *s, hr_err *err); /* links to their receivers' owners */
 
 /* solve.c */
 double hr_now(void);

@@ -63,6 +63,13 @@ for seed in $(seq "${MPI_STRESS:-10}"); do
   rm -rf "$t/f$seed"
 done
 
+# ---------------------------------------------------------------- migration
+# HRAD_TEST_MIGRATE=SEED: after every iteration every element moves to a new random rank with
+# the links it receives (hr_solver_migrate, what graph balancing will use): same answer.
+HRAD_TEST_MIGRATE=7 mpi 3 "${q[@]}" --threads 1 -o "$t/mg" cornell \
+  && same "$t/c1" "$t/mg" cornell "3 ranks, every element migrated after every iteration" \
+  || bad "migration run: exit $?"
+
 # ---------------------------------------------------------------- a rank fails
 for spec in 1:init 2:refine:3 1:push-pull:2 0:refine:2; do
   start=$(date +%s)
