@@ -16,9 +16,9 @@
  * 2 log2(P) latencies and 2 (P-1)/P of the data through each node's link) and K small
  * collectives (2 log2(P) latencies each), plus the initial exchange of the links (48 bytes a link,
  * (P-1)/P of them leave their rank) and, with random owners, the links refinement makes, which
- * travel with their candidate lists ((P-1)/P of them, spread over the ranks). Two machines: the paper's CM-5 (5 MB/s per node link, 88 us
- * per message; the processors' speed scaled so that one processor takes T1_TARGET seconds, the
- * paper's table 2 time for "floor" when given) and a current cluster (10 GB/s, 2 us, this
+ * travel with their candidate lists ((P-1)/P of them, spread over the ranks). Two machines:
+ * the paper's CM-5 (5 MB/s per node link, 88 us per message; the processors' speed scaled so
+ * that one processor takes T1_TARGET seconds, the paper's table 2 time for "floor" when given) and a current cluster (10 GB/s, 2 us, this
  * machine's processor speed). The assumptions are stated in BENCHMARKS.md. */
 #include "hrad.h"
 #include "partition/partition.h"

@@ -110,7 +110,8 @@ static int pack_links(const hr_solver *s, char **out, int64_t *bytes) {
   int64_t nb = 0;
   for (int64_t k = 0; k < s->nlinks; k++)
     if (s->links[k].Fu >= 0)
-      nb += (int64_t)sizeof(link_rec) + 4 * (int64_t)(s->links[k].ncand > 0 ? s->links[k].ncand : 0);
+      nb += (int64_t)sizeof(link_rec) +
+            4 * (int64_t)(s->links[k].ncand > 0 ? s->links[k].ncand : 0);
   char *b = malloc((size_t)(nb > 0 ? nb : 1));
   if (!b) return 0;
   int64_t o = 0;

@@ -762,7 +762,8 @@ static void parse_args(cli *c, int argc, char **argv) {
       const char *v = NEXT();
       if (!strcmp(v, "area")) c->balance_random = 0;
       else if (!strcmp(v, "random")) c->balance_random = 1, c->balance_seed = 1;
-      else if (!strncmp(v, "random:", 7)) c->balance_random = 1, c->balance_seed = parse_seed(v + 7);
+      else if (!strncmp(v, "random:", 7))
+        c->balance_random = 1, c->balance_seed = parse_seed(v + 7);
       else die_usage("--balance must be 'random', 'random:SEED' or 'area', got '%s'", v);
     } else if (!strcmp(a, "--camera")) parse_camera(c, NEXT());
     else if (!strcmp(a, "--emit")) parse_emit(c, NEXT());
