@@ -138,13 +138,13 @@ static int pack_links(const hr_solver *s, char **out, int64_t *bytes) {
 /* In a distributed run, every rank's packed links to rank 0 (the others keep nothing). A
  * collective; the same status on every rank. */
 static hr_status gather_links(const hr_solver *s, char **buf, int64_t *bytes, hr_err *err) {
-  int64_t *sb = calloc((size_t)s->nranks, sizeof *sb), *rb = malloc((size_t)s->nranks * sizeof *rb);
-  hr_status st = sb && rb ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  int64_t *sb = calloc((size_t)s->nranks, sizeof *sb);
+  hr_status st = sb ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
   if ((st = hr_dist_agree(s, st, err)) == HR_OK) {
     sb[0] = *bytes;
     void *all = NULL;
     int64_t tot = 0;
-    st = hr_dist_alltoall(s->dist, *buf, sb, &all, &tot, rb);
+    st = hr_dist_alltoall(s->dist, *buf, sb, &all, &tot);
     if (st == HR_OK) {
       free(*buf);
       *buf = all;
@@ -154,7 +154,6 @@ static hr_status gather_links(const hr_solver *s, char **buf, int64_t *bytes, hr
     }
   }
   free(sb);
-  free(rb);
   return st;
 }
 

@@ -302,14 +302,14 @@ static void init_row(const hr_solver *s, int i, row *rw) {
 static hr_status send_to_owners(hr_solver *s, hr_status st, hr_err *err) {
   if (st != HR_OK) return st;
   const int P = hr_dist_size(s->dist);
-  int64_t *cnt = calloc((size_t)P, sizeof *cnt), *rb = malloc((size_t)P * sizeof *rb);
+  int64_t *cnt = calloc((size_t)P, sizeof *cnt);
   hr_link *out = malloc((size_t)(s->nlinks > 0 ? s->nlinks : 1) * sizeof *out);
   int64_t *at = calloc((size_t)P + 1, sizeof *at);
-  st = cnt && rb && out && at ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  st = cnt && out && at ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
   if (hr_test_fail(s, HR_PHASE_INIT))
     st = hr_err_set(err, HR_ERR_NOMEM, "out of memory (injected by HRAD_TEST_FAIL)");
   if ((st = hr_dist_agree(s, st, err)) != HR_OK) {
-    free(cnt), free(rb), free(out), free(at);
+    free(cnt), free(out), free(at);
     return st;
   }
   for (int64_t k = 0; k < s->nlinks; k++) cnt[s->eown[s->links[k].r]]++;
@@ -318,8 +318,8 @@ static hr_status send_to_owners(hr_solver *s, hr_status st, hr_err *err) {
   for (int p = 0; p < P; p++) cnt[p] *= (int64_t)sizeof *out;
   void *recv = NULL;
   int64_t tot = 0;
-  st = hr_dist_alltoall(s->dist, out, cnt, &recv, &tot, rb);
-  free(cnt), free(rb), free(out), free(at);
+  st = hr_dist_alltoall(s->dist, out, cnt, &recv, &tot);
+  free(cnt), free(out), free(at);
   if (st != HR_OK) return hr_err_set(err, st, "out of memory in initial linking");
   free(s->links);
   s->links = recv;
@@ -456,10 +456,10 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
   const int P = s->nranks;
   hr_link *cur = *pcur;
   int64_t n = *pn, nstay = 0;
-  int64_t *sb = calloc((size_t)P, sizeof *sb), *rb = malloc((size_t)P * sizeof *rb);
+  int64_t *sb = calloc((size_t)P, sizeof *sb);
   int64_t *at = calloc((size_t)P + 1, sizeof *at);
   char *out = NULL;
-  if (sb && rb && at) {
+  if (sb && at) {
     for (int64_t i = 0; i < n; i++) {
       const int d = s->eown[cur[i].r];
       if (d != s->rank) sb[d] += (int64_t)sizeof(hr_link) + 4 * (int64_t)ncands(&cur[i]);
@@ -469,7 +469,7 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
   }
   st = out ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
   if ((st = hr_dist_agree(s, st, err)) != HR_OK) {
-    free(sb), free(rb), free(at), free(out);
+    free(sb), free(at), free(out);
     return st;
   }
   for (int64_t i = 0; i < n; i++) {
@@ -486,8 +486,8 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
   }
   void *recv = NULL;
   int64_t tot = 0;
-  st = hr_dist_alltoall(s->dist, out, sb, &recv, &tot, rb);
-  free(sb), free(rb), free(at), free(out);
+  st = hr_dist_alltoall(s->dist, out, sb, &recv, &tot);
+  free(sb), free(at), free(out);
   if (st != HR_OK) return hr_err_set(err, st, "out of memory during refinement");
   /* unpack: count, make room, copy */
   int64_t nr = 0, nc = 0;

@@ -129,58 +129,107 @@ void hr_dist_max_i64(const hr_dist *d, int64_t *v, int64_t n) {
   allreduce(d, v, n, MPI_INT64_T, sizeof *v, MPI_MAX);
 }
 
-/* Exchanges byte counts, then the bytes, point to point in rounds of at most CHUNK bytes per
- * pair so that every count fits an int (no int displacements either). */
+/* One received message of a sparse exchange. */
+typedef struct piece {
+  int src;
+  int64_t seq, n;
+  char *buf;
+} piece;
+
+static int cmp_piece(const void *a, const void *b) {
+  const piece *x = a, *y = b;
+  if (x->src != y->src) return x->src < y->src ? -1 : 1;
+  return (x->seq > y->seq) - (x->seq < y->seq);
+}
+
+/* Sparse personalised exchange without any count exchange (Hoefler, Siebert and Lumsdaine's
+ * NBX, "Scalable communication protocols for dynamic sparse data exchange", PPoPP 2010): each
+ * message goes out as a synchronous send (it completes only once received); a rank that sees
+ * all its sends complete enters a nonblocking barrier, and keeps receiving whatever arrives
+ * until the barrier completes, which happens only when every rank's sends have been received.
+ * No rank waits for a message that will not come, and no P^2 count table is needed. Messages
+ * of more than CHUNK bytes go in pieces (MPI keeps their order between one pair). What arrives
+ * is put in rank order, so the result is that of an all-to-all. Every rank gets the same
+ * status (a failed allocation is agreed on after the exchange). */
 hr_status hr_dist_alltoall(const hr_dist *d, const void *send, const int64_t *sbytes,
-                           void **recv, int64_t *rbytes_total, int64_t *rbytes) {
-  const int P = d->size;
+                           void **recv, int64_t *rbytes_total) {
+  const int P = d->size, TAG = 7;
   const double t0 = MPI_Wtime();
-  int64_t *soff = malloc((size_t)P * sizeof *soff), *roff = malloc((size_t)P * sizeof *roff);
-  MPI_Request *rq = malloc((size_t)(2 * P) * sizeof *rq);
-  int64_t bad = !soff || !roff || !rq;
-  char *rb = NULL;
-  if (!bad) MPI_Alltoall(sbytes, 1, MPI_INT64_T, rbytes, 1, MPI_INT64_T, d->comm);
-  int64_t ts = 0, tr = 0, rounds = 0;
-  for (int p = 0; p < P && !bad; p++) {
-    soff[p] = ts, roff[p] = tr;
-    ts += sbytes[p], tr += rbytes[p];
-    int64_t a = (sbytes[p] + CHUNK - 1) / CHUNK, b = (rbytes[p] + CHUNK - 1) / CHUNK;
-    rounds = a > rounds ? a : rounds;
-    rounds = b > rounds ? b : rounds;
+  int64_t nreq = 0, sent = 0, off = 0, bad = 0;
+  for (int p = 0; p < P; p++) nreq += (sbytes[p] + CHUNK - 1) / CHUNK;
+  MPI_Request *rq = malloc((size_t)(nreq > 0 ? nreq : 1) * sizeof *rq);
+  piece *pc = NULL;
+  int64_t npc = 0, cappc = 0, seq = 0;
+  if (!rq) MPI_Abort(d->comm, 1); /* the others may already wait for these messages */
+  const char *sb = send;
+  for (int p = 0, k = 0; p < P; off += sbytes[p], p++)
+    for (int64_t o = 0; o < sbytes[p]; o += CHUNK, k++) {
+      const int64_t n = sbytes[p] - o < CHUNK ? sbytes[p] - o : CHUNK;
+      MPI_Issend(sb + off + o, (int)n, MPI_BYTE, p, TAG, d->comm, &rq[k]);
+      sent += n;
+    }
+  MPI_Request barrier = MPI_REQUEST_NULL;
+  int in_barrier = 0;
+  for (;;) {
+    int flag = 0;
+    MPI_Status st;
+    MPI_Iprobe(MPI_ANY_SOURCE, TAG, d->comm, &flag, &st);
+    if (flag) {
+      int n = 0;
+      MPI_Get_count(&st, MPI_BYTE, &n);
+      char *buf = malloc((size_t)(n > 0 ? n : 1));
+      if (npc == cappc) {
+        int64_t nc = cappc ? 2 * cappc : 16;
+        piece *q = realloc(pc, (size_t)nc * sizeof *q);
+        if (q) pc = q, cappc = nc;
+      }
+      if (!buf || npc == cappc) { /* receive into a scratch byte and drop it: agreed below */
+        bad = 1;
+        char scratch[1];
+        free(buf);
+        buf = n > 1 ? malloc((size_t)n) : NULL;
+        MPI_Recv(buf ? buf : scratch, n, MPI_BYTE, st.MPI_SOURCE, TAG, d->comm,
+                 MPI_STATUS_IGNORE);
+        free(buf);
+        continue;
+      }
+      MPI_Recv(buf, n, MPI_BYTE, st.MPI_SOURCE, TAG, d->comm, MPI_STATUS_IGNORE);
+      pc[npc++] = (piece){st.MPI_SOURCE, seq++, n, buf};
+      continue;
+    }
+    if (!in_barrier) {
+      int done = 0;
+      MPI_Testall((int)nreq, rq, &done, MPI_STATUSES_IGNORE);
+      if (done) {
+        MPI_Ibarrier(d->comm, &barrier);
+        in_barrier = 1;
+      }
+    } else {
+      int done = 0;
+      MPI_Test(&barrier, &done, MPI_STATUS_IGNORE);
+      if (done) break;
+    }
   }
-  if (!bad && !(rb = malloc((size_t)(tr > 0 ? tr : 1)))) bad = 1;
-  int64_t v[2] = {bad, rounds}; /* every rank learns whether any failed, and the rounds */
-  hr_dist_max_i64(d, v, 2);
-  if (v[0]) {
+  free(rq);
+  /* in rank order (and, within a rank, in arrival order: MPI does not reorder one pair) */
+  qsort(pc, (size_t)npc, sizeof *pc, cmp_piece);
+  int64_t tot = 0;
+  for (int64_t i = 0; i < npc; i++) tot += pc[i].n;
+  char *rb = bad ? NULL : malloc((size_t)(tot > 0 ? tot : 1));
+  if (!rb) bad = 1;
+  for (int64_t i = 0, o = 0; i < npc; o += pc[i].n, i++) {
+    if (rb && pc[i].n) memcpy(rb + o, pc[i].buf, (size_t)pc[i].n);
+    free(pc[i].buf);
+  }
+  free(pc);
+  count((hr_dist *)d, sent - sbytes[d->rank], t0);
+  hr_dist_max_i64(d, &bad, 1);
+  if (bad) {
     free(rb);
-    free(soff);
-    free(roff);
-    free(rq);
     return HR_ERR_NOMEM;
   }
-  const char *sbase = send;
-  for (int64_t r = 0; r < v[1]; r++) {
-    int nq = 0;
-    for (int p = 0; p < P; p++) {
-      int64_t b = rbytes[p] - r * CHUNK;
-      if (b > 0)
-        MPI_Irecv(rb + roff[p] + r * CHUNK, (int)(b < CHUNK ? b : CHUNK), MPI_BYTE, p, 7, d->comm,
-                  &rq[nq++]);
-    }
-    for (int p = 0; p < P; p++) {
-      int64_t a = sbytes[p] - r * CHUNK;
-      if (a > 0)
-        MPI_Isend(sbase + soff[p] + r * CHUNK, (int)(a < CHUNK ? a : CHUNK), MPI_BYTE, p, 7,
-                  d->comm, &rq[nq++]);
-    }
-    MPI_Waitall(nq, rq, MPI_STATUSES_IGNORE);
-  }
-  free(soff);
-  free(roff);
-  free(rq);
   *recv = rb;
-  *rbytes_total = tr;
-  count((hr_dist *)d, ts - sbytes[d->rank], t0);
+  *rbytes_total = tot;
   return HR_OK;
 }
 

@@ -18,10 +18,11 @@ void hr_dist_max_f64(const hr_dist *d, double *v, int64_t n);
 void hr_dist_sum_i64(const hr_dist *d, int64_t *v, int64_t n);
 void hr_dist_max_i64(const hr_dist *d, int64_t *v, int64_t n);
 /* Personalised exchange: sbytes[p] bytes of 'send' (consecutive, in rank order) go to rank p;
- * '*recv' (malloc'd, caller frees) gets what each rank sent here, in rank order, rbytes[p] bytes
- * from rank p, '*rbytes_total' in all. d must not be NULL. */
+ * '*recv' (malloc'd, caller frees) gets what the ranks sent here, in rank order,
+ * '*rbytes_total' bytes in all. Sparse: ranks that send nothing to each other exchange nothing
+ * (NBX, dist.c). d must not be NULL. */
 hr_status hr_dist_alltoall(const hr_dist *d, const void *send, const int64_t *sbytes,
-                           void **recv, int64_t *rbytes_total, int64_t *rbytes);
+                           void **recv, int64_t *rbytes_total);
 /* The sorted union without repeats of every rank's 'mine' (n values): '*all' (malloc'd, caller
  * frees) with '*nall' values. d must not be NULL. */
 hr_status hr_dist_union_i32(const hr_dist *d, const int32_t *mine, int64_t n, int32_t **all,
