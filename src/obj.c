@@ -36,8 +36,10 @@
  *    such a face exists (or the library's own "default" if one defines it).
  * Polygons: hr_scene_add_polygon splits them; degenerate ones are skipped with the warning
  * "PATH:LINE: degenerate polygon skipped"; non-planar ones with more than 4 vertices, ones that are
- * not simple (edges crossing, a vertex revisited) and non-convex ones with more than HR_EAR_MAX
- * vertices are errors at their line. A face whose set of vertex positions (sorted, repeated
+ * not simple (edges crossing or touching, a vertex revisited other than at the ends of a bridge)
+ * and non-convex ones with more than HR_EAR_MAX vertices are errors at their line. A keyhole face
+ * (a hole joined to the outside by a bridge, an edge traversed once each way, as LightWave exports
+ * holes) loads without the hole's area. A face whose set of vertex positions (sorted, repeated
  * positions counted once, compared exactly) equals that of an earlier polygon facing the same way
  * (positive dot product of their Newell normals) is a duplicate: it is skipped with the warning
  * "PATH:LINE: duplicate of the polygon on line N; skipped" (the Cornell box data repeats a side

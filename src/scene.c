@@ -1,7 +1,8 @@
 /* scene.c: surfaces and materials, the immutable input of the solver (paper 2.2: "surface" or
  * "blocker"). Validates each input polygon: planar convex quads stay quads, other quads become two
- * triangles, larger polygons are fan-split; degenerate pieces are reported, not added. Scenes are
- * small immutable arrays so that later every process can hold a replica. */
+ * triangles, larger convex polygons are fan-split, non-convex ones (keyhole polygons with holes
+ * among them) are ear-clipped, self-crossing ones refused; degenerate pieces are reported, not
+ * added. Scenes are small immutable arrays so that later every process can hold a replica. */
 #include "hrad.h"
 #include "vec.h"
 
@@ -182,37 +183,280 @@ int hr_scene_poly_input(const hr_scene *s, int poly) {
 static hr_status add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
                              hr_poly_result *res);
 
-/* Ear clipping of a simple planar polygon with normal 'nrm' into n - 2 triangles (indices into v,
- * three per triangle, counter-clockwise seen from the front) in 'tri'. Returns 0 when no ear can
- * be found, i.e. the polygon is not simple (it crosses itself). O(n^2). */
-static int ear_clip(const hr_vec3 *v, int n, hr_vec3 nrm, int *tri) {
-  /* Project on the plane of the two axes other than the normal's largest, keeping the front's
-   * counter-clockwise order. */
+/* ---------------------------------------------------------------- non-convex polygons */
+
+/* A non-convex polygon projected on its plane, counter-clockwise seen from the front. Exporters
+ * write a polygon with a hole as one loop (a "keyhole"): the outer boundary, a cut to the hole
+ * (the bridge), the hole the other way round, and back along the same cut. Such a polygon
+ * revisits the positions at both ends of the bridge; 'pid' finds the revisits, 'back' pairs the
+ * bridge's two traversals. */
+typedef struct flat_poly {
+  int m;        /* vertices left after dropping repeats of the previous one (zero-length edges) */
+  int npos;     /* distinct positions */
+  double *x;    /* coordinates of vertex k in the plane: x[2 * k], x[2 * k + 1] */
+  int *src;     /* index in the input of vertex k */
+  int *pid;     /* position number of vertex k: equal coordinates, equal numbers */
+  int *by_pos;  /* the vertices sorted by position: the visits of one position are adjacent */
+  int *back;    /* edge k runs from vertex k to k + 1 (mod m); back[k] is the edge that traverses
+                   it the other way when k is a bridge, -1 otherwise */
+} flat_poly;
+
+static void flat_free(flat_poly *p) {
+  free(p->x);
+  free(p->src);
+  free(p->pid);
+  free(p->by_pos);
+  free(p->back);
+}
+
+/* Twice the signed area of triangle (a, b, c) of 'x': positive when counter-clockwise. */
+static double orient(const double *x, int a, int b, int c) {
+  return (x[2 * b] - x[2 * a]) * (x[2 * c + 1] - x[2 * a + 1]) -
+         (x[2 * b + 1] - x[2 * a + 1]) * (x[2 * c] - x[2 * a]);
+}
+
+static int same_xy(const double *x, int a, int b) {
+  return x[2 * a] == x[2 * b] && x[2 * a + 1] == x[2 * b + 1];
+}
+
+/* Projects v[0..n) on the plane of the two axes other than the normal's largest, keeping the
+ * front's counter-clockwise order, and drops every vertex at the position of the one before it:
+ * a zero-length edge touches nothing and would only block ears. 1 on success, -1 when out of
+ * memory. */
+static int flat_init(flat_poly *p, const hr_vec3 *v, int n, hr_vec3 nrm) {
   int ax = fabs(nrm.x) > fabs(nrm.y) ? (fabs(nrm.x) > fabs(nrm.z) ? 0 : 2)
                                      : (fabs(nrm.y) > fabs(nrm.z) ? 1 : 2);
   double sign = (ax == 0 ? nrm.x : ax == 1 ? nrm.y : nrm.z) > 0 ? 1 : -1;
-  double *x = malloc((size_t)n * 2 * sizeof *x);
-  int *next = malloc((size_t)n * sizeof *next), *prev = malloc((size_t)n * sizeof *prev);
-  int ok = x && next && prev;
-  for (int i = 0; ok && i < n; i++) {
+  p->m = p->npos = 0;
+  p->x = malloc((size_t)n * 2 * sizeof *p->x);
+  p->src = malloc((size_t)n * sizeof *p->src);
+  p->pid = malloc((size_t)n * sizeof *p->pid);
+  p->by_pos = malloc((size_t)n * sizeof *p->by_pos);
+  p->back = malloc((size_t)n * sizeof *p->back);
+  if (!p->x || !p->src || !p->pid || !p->by_pos || !p->back) return -1;
+  for (int i = 0; i < n; i++) {
     const double c[3] = {v[i].x, v[i].y, v[i].z};
-    x[2 * i] = c[(ax + 1) % 3];
-    x[2 * i + 1] = sign * c[(ax + 2) % 3];
-    next[i] = (i + 1) % n;
-    prev[i] = (i + n - 1) % n;
+    int k = p->m;
+    p->x[2 * k] = c[(ax + 1) % 3];
+    p->x[2 * k + 1] = sign * c[(ax + 2) % 3];
+    p->src[k] = i;
+    if (k == 0 || !same_xy(p->x, k, k - 1)) p->m++;
   }
-#define CROSS(a, b, c)                                                                             \
-  ((x[2 * (b)] - x[2 * (a)]) * (x[2 * (c) + 1] - x[2 * (a) + 1]) -                              \
-   (x[2 * (b) + 1] - x[2 * (a) + 1]) * (x[2 * (c)] - x[2 * (a)]))
-  int left = n, i = 0, nt = 0, miss = 0;
-  while (ok && left > 3) {
+  while (p->m > 1 && same_xy(p->x, p->m - 1, 0)) p->m--;
+  return 1;
+}
+
+typedef struct pos_key {
+  double x, y;
+  int k;
+} pos_key;
+
+static int cmp_pos(const void *pa, const void *pb) {
+  const pos_key *a = pa, *b = pb;
+  if (a->x != b->x) return a->x < b->x ? -1 : 1;
+  if (a->y != b->y) return a->y < b->y ? -1 : 1;
+  return (a->k > b->k) - (a->k < b->k);
+}
+
+/* Numbers the distinct positions (p->pid, p->npos, p->by_pos) by sorting: O(m log m). 1, or -1
+ * when out of memory. */
+static int number_positions(flat_poly *p) {
+  pos_key *key = malloc((size_t)p->m * sizeof *key);
+  if (!key) return -1;
+  for (int k = 0; k < p->m; k++) key[k] = (pos_key){p->x[2 * k], p->x[2 * k + 1], k};
+  qsort(key, (size_t)p->m, sizeof *key, cmp_pos);
+  p->npos = 0;
+  for (int r = 0; r < p->m; r++) {
+    if (r > 0 && (key[r].x != key[r - 1].x || key[r].y != key[r - 1].y)) p->npos++;
+    p->pid[key[r].k] = p->npos;
+    p->by_pos[r] = key[r].k;
+  }
+  p->npos++;
+  free(key);
+  return 1;
+}
+
+typedef struct edge_key {
+  int lo, hi, k; /* the edge's two position numbers, lower first, and the edge */
+} edge_key;
+
+static int cmp_edge(const void *pa, const void *pb) {
+  const edge_key *a = pa, *b = pb;
+  if (a->lo != b->lo) return a->lo < b->lo ? -1 : 1;
+  if (a->hi != b->hi) return a->hi < b->hi ? -1 : 1;
+  return (a->k > b->k) - (a->k < b->k);
+}
+
+/* Pairs the traversals of each bridge (p->back) and checks that bridges are the only way the
+ * polygon revisits a position: every segment is traversed once, or twice the opposite ways and
+ * not one right after the other (that would be a spike, enclosing nothing), and a position is
+ * visited once plus once per bridge ending there. A square written twice over, a side traversed
+ * three times or two loops touching at a vertex fail. 1, 0 when they fail, -1 when out of memory.
+ * O(m log m). */
+static int find_bridges(flat_poly *p) {
+  const int m = p->m;
+  edge_key *e = malloc((size_t)m * sizeof *e);
+  int *extra = calloc((size_t)p->npos, sizeof *extra); /* visits minus bridges ending there */
+  int ok = e && extra ? 1 : -1;
+  for (int k = 0; ok > 0 && k < m; k++) {
+    int a = p->pid[k], b = p->pid[(k + 1) % m];
+    e[k] = (edge_key){a < b ? a : b, a < b ? b : a, k};
+    p->back[k] = -1;
+    extra[a]++;
+  }
+  if (ok > 0) qsort(e, (size_t)m, sizeof *e, cmp_edge);
+  for (int g = 0, h; ok > 0 && g < m; g = h) {
+    for (h = g + 1; h < m && e[h].lo == e[g].lo && e[h].hi == e[g].hi;) h++;
+    if (h - g == 1) continue;
+    int k1 = e[g].k, k2 = e[g + 1].k; /* k1 < k2 */
+    if (h - g > 2 || p->pid[k1] == p->pid[k2] || k2 == k1 + 1 || (k1 == 0 && k2 == m - 1)) {
+      ok = 0;
+    } else {
+      p->back[k1] = k2;
+      p->back[k2] = k1;
+      extra[p->pid[k1]]--;
+      extra[p->pid[k2]]--;
+    }
+  }
+  for (int q = 0; ok > 0 && q < p->npos; q++)
+    if (extra[q] != 1) ok = 0;
+  free(e);
+  free(extra);
+  return ok;
+}
+
+/* 1 if a and b have opposite signs (neither zero). */
+static int opposite(double a, double b) { return (a > 0 && b < 0) || (a < 0 && b > 0); }
+
+/* 1 if vertex r lies in the bounding box of edge (a, b); with orient(a, b, r) == 0: on it. */
+static int in_box(const double *x, int a, int b, int r) {
+  for (int t = 0; t < 2; t++)
+    if (x[2 * r + t] < fmin(x[2 * a + t], x[2 * b + t]) ||
+        x[2 * r + t] > fmax(x[2 * a + t], x[2 * b + t]))
+      return 0;
+  return 1;
+}
+
+/* 1 if edges (a, b) and (c, d), on one line, share at most an end point. */
+static int collinear_apart(const double *x, int a, int b, int c, int d) {
+  int t = fabs(x[2 * b] - x[2 * a]) >= fabs(x[2 * b + 1] - x[2 * a + 1]) ? 0 : 1;
+  double lo = fmax(fmin(x[2 * a + t], x[2 * b + t]), fmin(x[2 * c + t], x[2 * d + t]));
+  double hi = fmin(fmax(x[2 * a + t], x[2 * b + t]), fmax(x[2 * c + t], x[2 * d + t]));
+  return hi <= lo;
+}
+
+/* 1 if edges k and l meet nowhere but at end positions they share: no crossing, no end of one
+ * on the inside of the other (a vertex touching an edge), no overlap along a common line. */
+static int edges_apart(const flat_poly *p, int k, int l) {
+  const double *x = p->x;
+  const int *pid = p->pid;
+  const int a = k, b = (k + 1) % p->m, c = l, d = (l + 1) % p->m;
+  for (int t = 0; t < 2; t++) /* bounding boxes apart: the common case, and cheap */
+    if (fmax(x[2 * a + t], x[2 * b + t]) < fmin(x[2 * c + t], x[2 * d + t]) ||
+        fmax(x[2 * c + t], x[2 * d + t]) < fmin(x[2 * a + t], x[2 * b + t]))
+      return 1;
+  double oc = orient(x, a, b, c), od = orient(x, a, b, d);
+  if (oc == 0 && od == 0) return collinear_apart(x, a, b, c, d);
+  double oa = orient(x, c, d, a), ob = orient(x, c, d, b);
+  if (opposite(oc, od) && opposite(oa, ob)) return 0; /* they cross */
+  int shared_c = pid[c] == pid[a] || pid[c] == pid[b];
+  int shared_d = pid[d] == pid[a] || pid[d] == pid[b];
+  int shared_a = pid[a] == pid[c] || pid[a] == pid[d];
+  int shared_b = pid[b] == pid[c] || pid[b] == pid[d];
+  return !((oc == 0 && !shared_c && in_box(x, a, b, c)) ||
+           (od == 0 && !shared_d && in_box(x, a, b, d)) ||
+           (oa == 0 && !shared_a && in_box(x, c, d, a)) ||
+           (ob == 0 && !shared_b && in_box(x, c, d, b)));
+}
+
+/* 1 if no two edges meet except consecutive ones at their common vertex, edges at a revisited
+ * position at that position, and a bridge's two traversals (one segment). O(m^2). */
+static int edges_meet_at_ends(const flat_poly *p) {
+  for (int k = 0; k < p->m; k++)
+    for (int l = k + 1; l < p->m; l++)
+      if (p->back[k] != l && !edges_apart(p, k, l)) return 0;
+  return 1;
+}
+
+/* 1 if the direction from vertex 'at' to vertex w lies strictly inside the counter-clockwise turn
+ * from the direction at -> u to the direction at -> t (w, u and t may be vertices at other visits
+ * of at's position: only directions count). */
+static int inside_turn(const double *x, int at, int u, int t, int w) {
+  double ut = orient(x, at, u, t);
+  if (ut > 0) return orient(x, at, u, w) > 0 && orient(x, at, w, t) > 0;
+  if (ut < 0) return !(orient(x, at, t, w) >= 0 && orient(x, at, w, u) >= 0); /* over half a turn */
+  double dot = (x[2 * u] - x[2 * at]) * (x[2 * t] - x[2 * at]) +
+               (x[2 * u + 1] - x[2 * at + 1]) * (x[2 * t + 1] - x[2 * at + 1]);
+  return dot < 0 && orient(x, at, u, w) > 0; /* half a turn; a spike (dot > 0) has no edges */
+}
+
+/* 1 if the polygon's passes through each revisited position do not cross there: no edge of one
+ * visit starts strictly inside the turn of another (the polygon's inside at a visit is the turn
+ * from its outgoing edge counter-clockwise to its incoming one). A keyhole that leaves a vertex
+ * for two holes must take the one nearer the incoming edge first; in the other order the two
+ * passes cross at the vertex. O(visits^2) per position. */
+static int passes_apart(const flat_poly *p) {
+  const int m = p->m;
+  for (int g = 0, h; g < m; g = h) {
+    for (h = g + 1; h < m && p->pid[p->by_pos[h]] == p->pid[p->by_pos[g]];) h++;
+    for (int r = g; r < h; r++) {
+      int j = p->by_pos[r], out = (j + 1) % m, in = (j + m - 1) % m;
+      for (int q = g; q < h; q++) {
+        int k = p->by_pos[q];
+        if (q != r && (inside_turn(p->x, j, out, in, (k + 1) % m) ||
+                       inside_turn(p->x, j, out, in, (k + m - 1) % m)))
+          return 0;
+      }
+    }
+  }
+  return 1;
+}
+
+/* 1 if vertex j, at the position of corner 'at' of counter-clockwise triangle (at, nx, pv), has
+ * an edge that starts into the triangle: then the polygon passes through that corner again and
+ * into the triangle, which is no ear. */
+static int enters_corner(const double *x, const int *next, const int *prev, int j, int at, int nx,
+                         int pv) {
+  return inside_turn(x, at, nx, pv, prev[j]) || inside_turn(x, at, nx, pv, next[j]);
+}
+
+/* 1 if triangle (a, i, c) of the remaining polygon is an ear: it turns left at i, and no other
+ * vertex lies inside it or on its sides. A vertex at the position of a corner (the other visit
+ * of a bridge's end) is not inside; it blocks the ear only when one of its edges starts into the
+ * triangle. */
+static int is_ear(const flat_poly *p, const int *next, const int *prev, int a, int i, int c) {
+  const double *x = p->x;
+  const int *pid = p->pid;
+  if (!(orient(x, a, i, c) > 0)) return 0;
+  for (int j = next[c]; j != a; j = next[j]) {
+    if (pid[j] == pid[a] || pid[j] == pid[i] || pid[j] == pid[c]) {
+      int at = pid[j] == pid[a] ? a : pid[j] == pid[i] ? i : c;
+      int nx = at == a ? i : at == i ? c : a, pv = at == a ? c : at == i ? a : i;
+      if (enters_corner(x, next, prev, j, at, nx, pv)) return 0;
+    } else if (orient(x, a, i, j) >= 0 && orient(x, i, c, j) >= 0 && orient(x, c, a, j) >= 0) {
+      return 0;
+    }
+  }
+  return 1;
+}
+
+/* Ear clipping of the checked polygon into m - 2 triangles (indices into the input, three per
+ * triangle, counter-clockwise seen from the front) in 'tri', in the standard order: walking
+ * round the polygon and cutting every ear met. 1, 0 when a whole turn finds no ear (the
+ * polygon is not simple), -1 when out of memory. O(m^2) for the usual polygons. */
+static int ear_clip(const flat_poly *p, int *tri) {
+  const int m = p->m;
+  int *next = malloc((size_t)m * sizeof *next), *prev = malloc((size_t)m * sizeof *prev);
+  int ok = next && prev ? 1 : -1;
+  for (int k = 0; ok > 0 && k < m; k++) {
+    next[k] = (k + 1) % m;
+    prev[k] = (k + m - 1) % m;
+  }
+  int left = m, i = 0, nt = 0, miss = 0;
+  while (ok > 0 && left > 3) {
     const int a = prev[i], c = next[i];
-    int ear = CROSS(a, i, c) > 0;
-    /* no other vertex inside or on the triangle (a, i, c) */
-    for (int j = next[c]; ear && j != a; j = next[j])
-      if (CROSS(a, i, j) >= 0 && CROSS(i, c, j) >= 0 && CROSS(c, a, j) >= 0) ear = 0;
-    if (ear) {
-      tri[3 * nt] = a, tri[3 * nt + 1] = i, tri[3 * nt + 2] = c;
+    if (is_ear(p, next, prev, a, i, c)) {
+      tri[3 * nt] = p->src[a], tri[3 * nt + 1] = p->src[i], tri[3 * nt + 2] = p->src[c];
       nt++;
       next[a] = c;
       prev[c] = a;
@@ -225,14 +469,34 @@ static int ear_clip(const hr_vec3 *v, int n, hr_vec3 nrm, int *tri) {
       i = c;
     }
   }
-#undef CROSS
-  if (ok) {
-    tri[3 * nt] = prev[i], tri[3 * nt + 1] = i, tri[3 * nt + 2] = next[i];
+  if (ok > 0) {
+    tri[3 * nt] = p->src[prev[i]], tri[3 * nt + 1] = p->src[i], tri[3 * nt + 2] = p->src[next[i]];
   }
-  free(x);
   free(next);
   free(prev);
   return ok;
+}
+
+/* Triangulates a planar non-convex polygon v[0..n) with normal 'nrm' into at most n - 2
+ * triangles in 'tri' (indices into v). Accepted: simple polygons and keyhole polygons whose only
+ * contacts with themselves are bridges. find_bridges, edges_meet_at_ends and passes_apart
+ * together mean that the two traversals of every bridge can be pulled a little apart, leaving
+ * a simple polygon: the polygon covers each point of its region once. That fails for a hole
+ * wound the same way as the outside (the passes through the bridge's end on the hole cross
+ * there), for a bridge that leaves the region, and for edges that cross or touch elsewhere.
+ * Returns the number of triangles, 0 when not simple, -1 when out of memory. O(n^2). */
+static int triangulate(const hr_vec3 *v, int n, hr_vec3 nrm, int *tri) {
+  flat_poly p;
+  int r = flat_init(&p, v, n, nrm);
+  if (r > 0 && p.m < 3) r = 0;
+  if (r > 0) r = number_positions(&p);
+  if (r > 0) r = find_bridges(&p);
+  if (r > 0) r = edges_meet_at_ends(&p);
+  if (r > 0) r = passes_apart(&p);
+  if (r > 0) r = ear_clip(&p, tri);
+  int nt = r > 0 ? p.m - 2 : r;
+  flat_free(&p);
+  return nt;
 }
 
 hr_status hr_scene_add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
@@ -291,26 +555,30 @@ static hr_status add_polygon(hr_scene *s, const hr_vec3 *v, int n, int material,
       st = push_surface(s, t, 3, material, poly, &added);
     }
   } else {
-    /* Not convex: ear clipping; the ears must cover exactly the polygon's area (a polygon that
-     * crosses itself has no such triangulation). */
+    /* Not convex: ear clipping; the ears must cover exactly the polygon's area (outer
+     * boundary less holes), a last check that every triangle faces the front. */
     if (n > HR_EAR_MAX) {
       *res = HR_POLY_NOT_SIMPLE;
       return HR_OK;
     }
     int *tri = malloc((size_t)(n - 2) * 3 * sizeof *tri);
     if (!tri) return HR_ERR_NOMEM;
-    int ok = ear_clip(v, n, nrm, tri);
+    int nt = triangulate(v, n, nrm, tri);
+    if (nt < 0) {
+      free(tri);
+      return HR_ERR_NOMEM;
+    }
     double sum = 0;
-    for (int k = 0; ok && k < n - 2; k++) {
+    for (int k = 0; k < nt; k++) {
       hr_vec3 t[3] = {v[tri[3 * k]], v[tri[3 * k + 1]], v[tri[3 * k + 2]]};
       sum += 0.5 * v3_len(v3_newell(t, 3));
     }
-    if (!ok || fabs(sum - 0.5 * len) > 1e-9 * sum + AREA_TOL * size * size) {
+    if (nt == 0 || fabs(sum - 0.5 * len) > 1e-9 * sum + AREA_TOL * size * size) {
       free(tri);
       *res = HR_POLY_NOT_SIMPLE;
       return HR_OK;
     }
-    for (int k = 0; k < n - 2 && st == HR_OK; k++) {
+    for (int k = 0; k < nt && st == HR_OK; k++) {
       hr_vec3 t[3] = {v[tri[3 * k]], v[tri[3 * k + 1]], v[tri[3 * k + 2]]};
       st = push_surface(s, t, 3, material, poly, &added);
     }

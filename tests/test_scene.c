@@ -1,6 +1,7 @@
 /* test_scene.c: polygons becoming surfaces (src/scene.c): convex and non-convex polygons keep
- * their area and orientation (ear clipping), self-crossing polygons are refused, large convex
- * polygons split in linear time, and every call records its input row. */
+ * their area and orientation (ear clipping), keyhole polygons (holes joined by bridges) lose their
+ * holes' area, self-crossing polygons are refused, large convex polygons split in linear time,
+ * and every call records its input row. */
 #include "testutil.h"
 #include "vec.h"
 
@@ -88,6 +89,138 @@ static void nonconvex(void) {
   CHECK(res == HR_POLY_NOT_SIMPLE && s->nsurfs == 0 && s->ninputs == 0,
         "pentagram: res %d, %d surfaces", res, s->nsurfs);
   hr_scene_destroy(&s);
+  /* Edges (5,1)-(0,0) and (4,1)-(2,0) cross; ear clipping alone found five left-turning ears
+   * (overlapping, total 4) and accepted it. */
+  hr_vec3 cross[5] = {tv(6, 4, 0), tv(5, 1, 0), tv(0, 0, 0), tv(4, 1, 0), tv(2, 0, 0)};
+  s = one(cross, 5, &res);
+  CHECK(res == HR_POLY_NOT_SIMPLE && s->nsurfs == 0 && s->ninputs == 0,
+        "crossing edges: res %d, %d surfaces", res, s->nsurfs);
+  hr_scene_destroy(&s);
+  /* The dented pentagon with its first vertex repeated at the end (a zero-length edge): area 6 */
+  hr_vec3 p6[6] = {p[0], p[1], p[2], p[3], p[4], p[0]};
+  s = one(p6, 6, &res);
+  CHECK(res == HR_POLY_ADDED, "closing vertex repeated: res %d", res);
+  check_tris(s, 6, "pentagon with its first vertex repeated");
+  hr_scene_destroy(&s);
+}
+
+/* Adds polygon q[0..n) rotated to start at vertex r; returns the scene and sets *res. */
+static hr_scene *one_rotated(const hr_vec3 *q, int n, int r, hr_poly_result *res) {
+  hr_vec3 w[32];
+  for (int k = 0; k < n; k++) w[k] = q[(k + r) % n];
+  return one(w, n, res);
+}
+
+/* Number of surfaces whose centroid lies in the open box (x0, x1) x (y0, y1) of the z = 0 plane:
+ * inside a hole when it should be 0. */
+static int centroids_in(const hr_scene *s, double x0, double y0, double x1, double y1) {
+  int in = 0;
+  for (int i = 0; i < s->nsurfs; i++) {
+    const hr_surface *f = &s->surfs[i];
+    double cx = 0, cy = 0;
+    for (int k = 0; k < f->nverts; k++) {
+      cx += f->v[k].x / f->nverts;
+      cy += f->v[k].y / f->nverts;
+    }
+    in += cx > x0 && cx < x1 && cy > y0 && cy < y1;
+  }
+  return in;
+}
+
+/* 1 if the polygon was refused as not simple, with nothing added and no input row. */
+static int refused(const hr_scene *s, hr_poly_result res) {
+  return res == HR_POLY_NOT_SIMPLE && s->nsurfs == 0 && s->npolys == 0 && s->ninputs == 0;
+}
+
+static void keyholes(void) {
+  printf("keyhole polygons (holes joined by bridges)\n");
+  hr_poly_result res;
+  /* A 4x4 square with a 2x2 hole, written as one loop: round the outside from (0,0), along the
+   * bridge to (1,1), round the hole clockwise, back along the bridge. Area 16 - 4, whichever
+   * vertex the loop starts at; no triangle in the hole. */
+  hr_vec3 sq[10] = {tv(0, 0, 0), tv(4, 0, 0), tv(4, 4, 0), tv(0, 4, 0), tv(0, 0, 0),
+                    tv(1, 1, 0), tv(1, 3, 0), tv(3, 3, 0), tv(3, 1, 0), tv(1, 1, 0)};
+  for (int r = 0; r < 10; r++) {
+    hr_scene *s = one_rotated(sq, 10, r, &res);
+    CHECK(res == HR_POLY_ADDED && s->nsurfs == 8, "square with hole, start %d: res %d, %d surfaces",
+          r, res, s->nsurfs);
+    if (res != HR_POLY_ADDED) {
+      hr_scene_destroy(&s);
+      continue;
+    }
+    check_tris(s, 12, "square with a bridged hole: area");
+    CHECK(s->poly_area[0] == 12, "start %d: area %.17g, not exactly 12", r, s->poly_area[0]);
+    CHECK(centroids_in(s, 1, 1, 3, 3) == 0, "start %d: %d triangles in the hole", r,
+          centroids_in(s, 1, 1, 3, 3));
+    CHECK(centroids_in(s, 0, 0, 4, 4) == s->nsurfs, "start %d: triangles outside the square", r);
+    hr_scene_destroy(&s);
+  }
+  /* The hole's loop wound the same way as the outside: inside the hole the loop winds twice. */
+  hr_vec3 ccw[10] = {tv(0, 0, 0), tv(4, 0, 0), tv(4, 4, 0), tv(0, 4, 0), tv(0, 0, 0),
+                     tv(1, 1, 0), tv(3, 1, 0), tv(3, 3, 0), tv(1, 3, 0), tv(1, 1, 0)};
+  for (int r = 0; r < 10; r += 3) {
+    hr_scene *s = one_rotated(ccw, 10, r, &res);
+    CHECK(refused(s, res), "hole wound wrongly, start %d: res %d, %d surfaces", r, res,
+          s->nsurfs);
+    hr_scene_destroy(&s);
+  }
+  /* A diamond hole reached by a bridge from the corner (0,4); its bottom vertex touches the
+   * bottom edge of the square at (2,0): a contact other than the bridge, refused. Lifted by
+   * 2^-10 off that edge it is an ordinary hole: area 16 - (2 - 2^-10). */
+  const double lift[2] = {0, 1.0 / 1024};
+  for (int t = 0; t < 2; t++) {
+    hr_vec3 dia[10] = {tv(0, 0, 0), tv(4, 0, 0),        tv(4, 4, 0), tv(0, 4, 0), tv(2, 2, 0),
+                       tv(3, 1, 0), tv(2, lift[t], 0), tv(1, 1, 0), tv(2, 2, 0), tv(0, 4, 0)};
+    hr_scene *s = one(dia, 10, &res);
+    if (t == 0) {
+      CHECK(refused(s, res), "hole touching the edge: res %d, %d surfaces", res, s->nsurfs);
+    } else {
+      CHECK(res == HR_POLY_ADDED && s->nsurfs == 8, "hole near the edge: res %d, %d surfaces",
+            res, s->nsurfs);
+      check_tris(s, 14 + lift[t], "square with a diamond hole 2^-10 off its edge: area");
+      int in = 0; /* centroids inside the diamond |x - 2| + |y - 1| < 1 */
+      for (int i = 0; i < s->nsurfs; i++) {
+        const hr_surface *f = &s->surfs[i];
+        double cx = (f->v[0].x + f->v[1].x + f->v[2].x) / 3;
+        double cy = (f->v[0].y + f->v[1].y + f->v[2].y) / 3;
+        in += fabs(cx - 2) + fabs(cy - 1) < 1 - lift[t];
+      }
+      CHECK(in == 0, "%d triangles in the diamond hole", in);
+    }
+    hr_scene_destroy(&s);
+  }
+  /* Two holes bridged from the same corner (0,0) of a 6x6 square: area 36 - 1 - 1. Leaving the
+   * corner, the loop must take the hole nearer its incoming edge first (the one towards (0,6));
+   * in the other order its two passes through the corner cross there. */
+  hr_vec3 two[16] = {tv(0, 0, 0), tv(6, 0, 0), tv(6, 6, 0), tv(0, 6, 0), tv(0, 0, 0), tv(1, 4, 0),
+                     tv(1, 5, 0), tv(2, 5, 0), tv(2, 4, 0), tv(1, 4, 0), tv(0, 0, 0), tv(4, 1, 0),
+                     tv(4, 2, 0), tv(5, 2, 0), tv(5, 1, 0), tv(4, 1, 0)};
+  for (int r = 0; r < 16; r += 5) {
+    hr_scene *s = one_rotated(two, 16, r, &res);
+    CHECK(res == HR_POLY_ADDED, "two holes, start %d: res %d", r, res);
+    check_tris(s, 34, "two holes bridged from one corner: area");
+    CHECK(centroids_in(s, 1, 4, 2, 5) + centroids_in(s, 4, 1, 5, 2) == 0,
+          "start %d: triangles in a hole", r);
+    hr_scene_destroy(&s);
+  }
+  hr_vec3 swapped[16];
+  for (int k = 0; k < 16; k++) /* outside, hole (4,1) first, the corner, hole (1,4) */
+    swapped[k] = k < 5 ? two[k] : k < 10 ? two[k + 6] : k == 10 ? two[4] : two[k - 6];
+  hr_scene *s = one(swapped, 16, &res);
+  CHECK(refused(s, res), "two holes in the crossing order: res %d, %d surfaces", res, s->nsurfs);
+  hr_scene_destroy(&s);
+  /* A square written twice over (as the face of assimp's box_longline.obj, 234 times) winds
+   * twice round its inside; a spike (an edge there and straight back) encloses nothing. */
+  hr_vec3 twice[8] = {tv(0, 0, 0), tv(1, 0, 0), tv(1, 1, 0), tv(0, 1, 0),
+                      tv(0, 0, 0), tv(1, 0, 0), tv(1, 1, 0), tv(0, 1, 0)};
+  s = one(twice, 8, &res);
+  CHECK(refused(s, res), "square written twice: res %d, %d surfaces", res, s->nsurfs);
+  hr_scene_destroy(&s);
+  hr_vec3 spike[6] = {tv(0, 0, 0), tv(2, 0, 0), tv(2, 2, 0), tv(1, 1, 0), tv(1, 0.5, 0),
+                      tv(1, 1, 0)};
+  s = one(spike, 6, &res);
+  CHECK(refused(s, res), "spike: res %d, %d surfaces", res, s->nsurfs);
+  hr_scene_destroy(&s);
 }
 
 /* A unit box (floor emitting) moved 'off' along every axis; returns hr_solver_create's status. */
@@ -135,6 +268,7 @@ static void large_convex(void) {
 
 int main(void) {
   nonconvex();
+  keyholes();
   far_from_origin();
   large_convex();
   return t_done("test_scene");
