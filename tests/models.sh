@@ -70,7 +70,7 @@ while IFS= read -r f; do
   mat=$(sed -n 's/^usemtl[ \t]\{1,\}\(.*[^ \t\r]\)[ \t\r]*$/\1/p' "$f" | head -n 1)
   [ -n "$mat" ] || mat=default
   out="$t/o$n"
-  timeout 60 "$hrad" --quiet --threads 2 --bf-low 1e-2 --emit "$mat=5,5,5" -o "$out" "$f" \
+  timeout 240 "$hrad" --quiet --threads 2 --bf-low 1e-2 --emit "$mat=5,5,5" -o "$out" "$f" \
     > /dev/null 2> "$t/err"
   st=$?
   errs=$(grep -v '^hrad: warning' "$t/err")

@@ -411,7 +411,9 @@ static void *sig_thread(void *arg) {
     if (sigwait(&g_sigs, &sig) != 0) continue;
     if (n == 0) {
       atomic_store(&g_stop, sig);
-      if (g_rank == 0) /* mpirun passes a signal to every rank: one line */
+      /* mpirun passes a signal to every rank: one line, from rank 0; and a SIGTERM under
+       * mpirun is mpirun ending the job after another rank failed, which that rank reported */
+      if (g_rank == 0 && !(g_dist && sig == SIGTERM))
         fprintf(stderr,
               "hrad: interrupted by %s: stopping without writing outputs (once more to stop at "
               "once)\n",
