@@ -212,7 +212,7 @@ hr_status hr_dist_alltoall(const hr_dist *d, const void *send, const int64_t *sb
   }
   free(rq);
   /* in rank order (and, within a rank, in arrival order: MPI does not reorder one pair) */
-  qsort(pc, (size_t)npc, sizeof *pc, cmp_piece);
+  if (npc > 1) qsort(pc, (size_t)npc, sizeof *pc, cmp_piece);
   int64_t tot = 0;
   for (int64_t i = 0; i < npc; i++) tot += pc[i].n;
   char *rb = bad ? NULL : malloc((size_t)(tot > 0 ? tot : 1));
