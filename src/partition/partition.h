@@ -1,13 +1,49 @@
-/* partition.h: graph and weight partitioning, pure code (no radiosity types, no MPI). Issue 11
- * adds the paper's annealing on eq. (5), METIS and spatial bisection behind the same kind of
- * interface: weights and edges in, a part per node out, caller-owned. */
+/* partition.h: graph and weight partitioning, pure code (no radiosity types, no MPI): weights
+ * and edges in, a part per node out, caller-owned arrays. The distributed solver's balancing
+ * (paper 2.2.5, issue 11) chooses among these; every function is deterministic for a given
+ * input (and seed). Functions return 1 on success, 0 when out of memory or given bad input. */
 #ifndef HR_PARTITION_H
 #define HR_PARTITION_H
 
 #include <stdint.h>
 
+/* An undirected graph in CSR form: the neighbours of node i are adj[xadj[i] .. xadj[i+1]),
+ * each edge stored in both directions with the same weight c[k] (communication); w[i] is node
+ * i's weight (work). No self-loops. */
+typedef struct hr_graph {
+  int n;
+  const int64_t *xadj; /* n + 1 offsets */
+  const int32_t *adj;
+  const double *w;     /* n node weights, >= 0 */
+  const double *c;     /* xadj[n] edge weights, >= 0 */
+} hr_graph;
+
 /* Greedy largest-first: nodes in decreasing weight (ties by index), each to the part with the
- * least weight so far (ties to the lowest part). part[i] in [0, nparts). 0 when out of memory. */
+ * least weight so far (ties to the lowest part). part[i] in [0, nparts). */
 int hr_partition_greedy(const double *weight, int n, int nparts, int32_t *part);
+
+/* The paper's cost, eq. (5): Z = max over parts p of alpha C_p + (1 - alpha) W_p, with W_p the
+ * weight of p's nodes and C_p the weight of the edges with one end in p and the other outside
+ * (each cut edge counts for both its parts). Also, when not NULL: cut = the weight of all cut
+ * edges (each once), and imbalance = max W_p / mean W_p. */
+double hr_partition_cost(const hr_graph *g, const int32_t *part, int nparts, double alpha,
+                         double *cut, double *imbalance);
+
+/* METIS k-way (METIS_PartGraphKway, weights scaled to its integer types), minimising the cut
+ * with parts of equal weight within 3%. */
+int hr_partition_metis(const hr_graph *g, int nparts, int32_t *part);
+
+/* Orthogonal recursive bisection of points xyz (n x 3) with weights w: the longest extent of
+ * the bounding box is split at the weighted median, parts in proportion (nparts need not be a
+ * power of two). */
+int hr_partition_orb(const double *xyz, const double *w, int n, int nparts, int32_t *part);
+
+/* The paper's method: clustering (traverse maximum-weight edges from unvisited nodes until a
+ * cluster reaches a size bound), simulated annealing of the clustered graph on Z with Metropolis
+ * acceptance and a cooling schedule, then the same on the unclustered graph to refine. 'part'
+ * holds a starting partition on entry (for example ORB's or greedy's) and the result on exit;
+ * never worse in Z than the start. */
+int hr_partition_anneal(const hr_graph *g, int nparts, double alpha, uint64_t seed,
+                        int32_t *part);
 
 #endif
