@@ -1,0 +1,585 @@
+/* anneal.c: the paper's graph balancing (2.2.5, eq. (5)) behind partition.h: clustering along
+ * heavy edges, simulated annealing of the clustered graph on Z with Metropolis acceptance, then
+ * a low-temperature annealing of the original graph to refine.
+ *
+ * The annealed energy is Z + mean part cost, not Z alone: a move between two parts that are not
+ * the heaviest leaves the max unchanged, so on pure Z most moves are free and the walk drifts
+ * (shared/PLATFORM.md, "Graph partitioners"). With equal total work the mean part cost only
+ * varies with the cut, so the extra term pulls the cut down while Z keeps the balance. The
+ * result is the best partition seen by Z (ties by the sum of part costs), and never worse in Z
+ * than the start, which is a candidate itself. Deterministic: one splitmix64 stream per call. */
+#include "partition/partition.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Coarse clusters weigh about total / (nparts * CLUSTERS_PER_PART): enough clusters per part to
+ * balance to ~1/8 of a part, few enough that the coarse annealing is cheap and global. */
+#define CLUSTERS_PER_PART 8
+/* Proposal budgets, per node of the annealed graph: the coarse graph is small, so it can afford
+ * a thorough schedule; the fine one only needs to smooth boundaries and balance. */
+#define COARSE_MOVES_PER_NODE 512
+#define COARSE_MOVES_MIN 4096
+#define FINE_MOVES_PER_NODE 24
+/* Start temperatures in units of the typical |delta| of a move: the coarse graph is shaken up
+ * (its start may be poor), the fine one only warmed, so that it keeps what it was given. */
+#define COARSE_HOT 1.0
+#define FINE_HOT 0.1
+/* Temperature levels of the geometric schedule, and the proposals that set its start. */
+#define SCHEDULE_LEVELS 64
+#define SAMPLE_PROPOSALS 256
+/* One proposal in this many sends a node to a random part rather than a neighbour's, so that an
+ * empty part (which has no neighbours) can still be refilled. */
+#define RANDOM_PART_ODDS 32
+
+/* ---- cost ---------------------------------------------------------------------------------- */
+
+static double part_cost(double alpha, double c, double w) { return alpha * c + (1.0 - alpha) * w; }
+
+/* Per-part work W[p] and communication C[p] of 'part' (arrays of nparts, zeroed here). */
+static void part_loads(const hr_graph *g, const int32_t *part, int nparts, double *W, double *C) {
+  for (int p = 0; p < nparts; p++) W[p] = C[p] = 0.0;
+  for (int v = 0; v < g->n; v++) {
+    W[part[v]] += g->w[v];
+    for (int64_t k = g->xadj[v]; k < g->xadj[v + 1]; k++)
+      if (part[g->adj[k]] != part[v]) C[part[v]] += g->c[k];
+  }
+}
+
+static int parts_in_range(const int32_t *part, int n, int nparts) {
+  for (int v = 0; v < n; v++)
+    if (part[v] < 0 || part[v] >= nparts) return 0;
+  return 1;
+}
+
+/* Returns -1 (and -1 in cut and imbalance) on bad input or out of memory: Z itself is >= 0. */
+double hr_partition_cost(const hr_graph *g, const int32_t *part, int nparts, double alpha,
+                         double *cut, double *imbalance) {
+  double *W = NULL, *C = NULL;
+  if (g && part && g->n >= 0 && nparts >= 1 && parts_in_range(part, g->n, nparts)) {
+    W = malloc((size_t)nparts * sizeof *W);
+    C = malloc((size_t)nparts * sizeof *C);
+  }
+  if (!W || !C) {
+    free(W);
+    free(C);
+    if (cut) *cut = -1.0;
+    if (imbalance) *imbalance = -1.0;
+    return -1.0;
+  }
+  part_loads(g, part, nparts, W, C);
+  double z = 0.0, csum = 0.0, wsum = 0.0, wmax = 0.0;
+  for (int p = 0; p < nparts; p++) {
+    z = fmax(z, part_cost(alpha, C[p], W[p]));
+    csum += C[p];
+    wsum += W[p];
+    wmax = fmax(wmax, W[p]);
+  }
+  if (cut) *cut = 0.5 * csum; /* every cut edge is in the C of both its parts */
+  if (imbalance) *imbalance = wsum > 0.0 ? wmax / (wsum / nparts) : 1.0;
+  free(W);
+  free(C);
+  return z;
+}
+
+/* ---- random numbers ------------------------------------------------------------------------ */
+
+static uint64_t rng_next(uint64_t *s) { /* splitmix64 */
+  uint64_t z = (*s += 0x9e3779b97f4a7c15ull);
+  z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ull;
+  z = (z ^ (z >> 27)) * 0x94d049bb133111ebull;
+  return z ^ (z >> 31);
+}
+
+static double rng_unit(uint64_t *s) { return (double)(rng_next(s) >> 11) * 0x1p-53; }
+
+/* Uniform in [0, n) for n >= 1 (the modulo bias is below 2^-32 for any int n: irrelevant). */
+static int64_t rng_below(uint64_t *s, int64_t n) { return (int64_t)(rng_next(s) % (uint64_t)n); }
+
+/* ---- annealing state ----------------------------------------------------------------------- */
+
+/* The annealed graph, its partition and incremental per-part loads. 'top' holds the (up to)
+ * three parts of highest cost, which is enough for the max over the parts a move leaves alone.
+ * The best partition seen is kept lazily: 'journal' lists the nodes moved since 'best' last
+ * matched 'part' (or 'stale' says it grew too long and a full copy is due). */
+typedef struct anneal_state {
+  const hr_graph *g;
+  int nparts;
+  double alpha;
+  int32_t *part;
+  double *W, *C;
+  int top[3];
+  double z, sum; /* the max and the sum of the part costs */
+  int32_t *best;
+  double best_z, best_sum;
+  int32_t *journal;
+  int64_t njournal;
+  int stale;
+} anneal_state;
+
+/* A proposed move and its effect on the two parts involved. */
+typedef struct move {
+  int32_t v, from, to;
+  double c_from, c_to, w_from, w_to; /* loads after the move */
+  double z, sum;                     /* the max and the sum of the part costs after */
+} move;
+
+static double state_cost(const anneal_state *st, int p) {
+  return part_cost(st->alpha, st->C[p], st->W[p]);
+}
+
+static double state_energy(const anneal_state *st, double z, double sum) {
+  return z + sum / st->nparts;
+}
+
+/* Recomputes the three costliest parts, Z and the sum: O(nparts), after every accepted move. */
+static void state_rank(anneal_state *st) {
+  st->top[0] = st->top[1] = st->top[2] = -1;
+  st->sum = 0.0;
+  for (int p = 0; p < st->nparts; p++) {
+    const double cp = state_cost(st, p);
+    st->sum += cp;
+    int slot = 3;
+    while (slot > 0 && (st->top[slot - 1] < 0 || cp > state_cost(st, st->top[slot - 1]))) slot--;
+    if (slot == 3) continue;
+    for (int k = 2; k > slot; k--) st->top[k] = st->top[k - 1];
+    st->top[slot] = p;
+  }
+  st->z = state_cost(st, st->top[0]);
+}
+
+/* Is (z, sum) better than the best so far? The tolerance absorbs the drift of the incremental
+ * loads, so that a re-visit of the best partition does not count as an improvement. */
+static int is_better(double z, double sum, double best_z, double best_sum) {
+  const double tol = 1e-12 * (fabs(best_z) + fabs(best_sum) + 1.0);
+  if (z < best_z - tol) return 1;
+  return z <= best_z + tol && sum < best_sum - tol;
+}
+
+/* Makes 'best' the current partition. */
+static void state_save_best(anneal_state *st) {
+  if (st->stale)
+    memcpy(st->best, st->part, (size_t)st->g->n * sizeof *st->part);
+  else
+    for (int64_t j = 0; j < st->njournal; j++) st->best[st->journal[j]] = st->part[st->journal[j]];
+  st->njournal = 0;
+  st->stale = 0;
+  st->best_z = st->z;
+  st->best_sum = st->sum;
+}
+
+/* Sets up the loads of st->part (the caller's start) and takes it as the best so far. The
+ * arrays are the caller's: nparts loads each, n entries for best and journal. */
+static void state_init(anneal_state *st, const hr_graph *g, int nparts, double alpha,
+                       int32_t *part, double *W, double *C, int32_t *best, int32_t *journal) {
+  *st = (anneal_state){.g = g, .nparts = nparts, .alpha = alpha, .part = part, .W = W, .C = C,
+                       .best = best, .journal = journal, .stale = 1};
+  part_loads(g, part, nparts, W, C);
+  state_rank(st);
+  state_save_best(st);
+}
+
+/* Picks a node and a part to move it to: a neighbour's part (the paper's "neighbouring" moves,
+ * which keep parts connected), or now and then any other part. Returns 0 when the pick is no
+ * move (the neighbour is in the same part), which is cheap and frequent inside parts. */
+static int propose(const anneal_state *st, uint64_t *rng, move *m) {
+  const hr_graph *g = st->g;
+  const int32_t v = (int32_t)rng_below(rng, g->n);
+  const int64_t deg = g->xadj[v + 1] - g->xadj[v];
+  m->v = v;
+  m->from = st->part[v];
+  if (deg == 0 || rng_below(rng, RANDOM_PART_ODDS) == 0) {
+    m->to = (int32_t)rng_below(rng, st->nparts - 1);
+    m->to += m->to >= m->from;
+    return 1;
+  }
+  m->to = st->part[g->adj[g->xadj[v] + rng_below(rng, deg)]];
+  return m->to != m->from;
+}
+
+/* Fills in the loads, Z and sum after m. Only the two parts involved change: an edge from v to
+ * a third part is cut before and after. */
+static void evaluate(const anneal_state *st, move *m) {
+  const hr_graph *g = st->g;
+  double e_from = 0.0, e_to = 0.0, e_all = 0.0;
+  for (int64_t k = g->xadj[m->v]; k < g->xadj[m->v + 1]; k++) {
+    const int32_t u = g->adj[k];
+    if (u == m->v) continue; /* a self-loop moves with its node */
+    e_all += g->c[k];
+    if (st->part[u] == m->from) e_from += g->c[k];
+    else if (st->part[u] == m->to) e_to += g->c[k];
+  }
+  m->c_from = st->C[m->from] - (e_all - e_from) + e_from;
+  m->c_to = st->C[m->to] + (e_all - e_to) - e_to;
+  m->w_from = st->W[m->from] - g->w[m->v];
+  m->w_to = st->W[m->to] + g->w[m->v];
+  const double cf = part_cost(st->alpha, m->c_from, m->w_from);
+  const double ct = part_cost(st->alpha, m->c_to, m->w_to);
+  double rest = 0.0; /* costs are >= 0, so 0 stands for "no third part" */
+  for (int k = 0; k < 3; k++) {
+    const int p = st->top[k];
+    if (p >= 0 && p != m->from && p != m->to) {
+      rest = state_cost(st, p);
+      break;
+    }
+  }
+  m->z = fmax(rest, fmax(cf, ct));
+  m->sum = st->sum - state_cost(st, m->from) - state_cost(st, m->to) + cf + ct;
+}
+
+static void apply(anneal_state *st, const move *m) {
+  st->part[m->v] = m->to;
+  st->C[m->from] = m->c_from;
+  st->C[m->to] = m->c_to;
+  st->W[m->from] = m->w_from;
+  st->W[m->to] = m->w_to;
+  state_rank(st);
+  if (!st->stale) {
+    if (st->njournal < st->g->n) st->journal[st->njournal++] = m->v;
+    else st->stale = 1;
+  }
+  if (is_better(st->z, st->sum, st->best_z, st->best_sum)) state_save_best(st);
+}
+
+/* The typical energy change of a proposed move: the mean |delta| over a sample of proposals
+ * that change the energy (0 when none does). Proposals only, nothing is applied. */
+static double typical_delta(const anneal_state *st, uint64_t *rng) {
+  const double e0 = state_energy(st, st->z, st->sum);
+  double total = 0.0;
+  int count = 0;
+  for (int i = 0; i < SAMPLE_PROPOSALS; i++) {
+    move m;
+    if (!propose(st, rng, &m)) continue;
+    evaluate(st, &m);
+    const double d = fabs(state_energy(st, m.z, m.sum) - e0);
+    if (d > 0.0) total += d, count++;
+  }
+  return count ? total / count : 0.0;
+}
+
+/* Metropolis annealing: 'moves' proposals over SCHEDULE_LEVELS temperatures falling
+ * geometrically from t_start to t_end. With t_start 0 it is a descent that takes ties. */
+static void anneal_run(anneal_state *st, int64_t moves, double t_start, double t_end,
+                       uint64_t *rng) {
+  if (st->nparts < 2 || st->g->n == 0) return;
+  const double ratio = t_start > 0.0 ? pow(t_end / t_start, 1.0 / (SCHEDULE_LEVELS - 1)) : 0.0;
+  const int64_t per_level = moves / SCHEDULE_LEVELS + 1;
+  double t = t_start;
+  for (int level = 0; level < SCHEDULE_LEVELS; level++, t *= ratio) {
+    for (int64_t i = 0; i < per_level; i++) {
+      move m;
+      if (!propose(st, rng, &m)) continue;
+      evaluate(st, &m);
+      const double delta = state_energy(st, m.z, m.sum) - state_energy(st, st->z, st->sum);
+      if (delta <= 0.0 || (t > 0.0 && rng_unit(rng) < exp(-delta / t))) apply(st, &m);
+    }
+  }
+}
+
+/* Anneals 'part' on g from the temperature 'hot' times the typical |delta| down to a thousandth
+ * of it, and leaves the best partition seen in 'part'. Returns 0 when out of memory. */
+static int anneal_graph(const hr_graph *g, int nparts, double alpha, int32_t *part, double hot,
+                        int64_t moves, uint64_t *rng) {
+  const size_t n = (size_t)(g->n > 0 ? g->n : 1);
+  double *W = malloc((size_t)nparts * sizeof *W), *C = malloc((size_t)nparts * sizeof *C);
+  int32_t *best = malloc(n * sizeof *best), *journal = malloc(n * sizeof *journal);
+  const int ok = W && C && best && journal;
+  if (ok) {
+    anneal_state st;
+    state_init(&st, g, nparts, alpha, part, W, C, best, journal);
+    const double t0 = hot * typical_delta(&st, rng);
+    anneal_run(&st, moves, t0, t0 * 1e-3, rng);
+    memcpy(part, best, (size_t)g->n * sizeof *part);
+  }
+  free(W);
+  free(C);
+  free(best);
+  free(journal);
+  return ok;
+}
+
+/* ---- clustering ---------------------------------------------------------------------------- */
+
+/* An owned CSR graph (the clustered one). */
+typedef struct owned_graph {
+  int n;
+  int64_t *xadj;
+  int32_t *adj;
+  double *w, *c;
+} owned_graph;
+
+static void owned_free(owned_graph *o) {
+  free(o->xadj);
+  free(o->adj);
+  free(o->w);
+  free(o->c);
+}
+
+static hr_graph owned_view(const owned_graph *o) {
+  return (hr_graph){.n = o->n, .xadj = o->xadj, .adj = o->adj, .w = o->w, .c = o->c};
+}
+
+/* The frontier of a growing cluster: a max-heap on the connection weight to the cluster, first
+ * pushed first among equals (so that equal weights grow the cluster breadth-first, compactly,
+ * rather than along a line). Entries go stale when a node's connection grows; those are
+ * skipped on pop. */
+typedef struct heap_entry {
+  double key;
+  int64_t seq;
+  int32_t v;
+} heap_entry;
+
+typedef struct frontier {
+  heap_entry *e;
+  int64_t size, seq;
+} frontier;
+
+static int entry_before(const heap_entry *a, const heap_entry *b) {
+  return a->key > b->key || (a->key == b->key && a->seq < b->seq);
+}
+
+static void frontier_push(frontier *f, int32_t v, double key) {
+  int64_t i = f->size++;
+  f->e[i] = (heap_entry){key, f->seq++, v};
+  while (i > 0 && entry_before(&f->e[i], &f->e[(i - 1) / 2])) {
+    const heap_entry t = f->e[i];
+    f->e[i] = f->e[(i - 1) / 2];
+    f->e[(i - 1) / 2] = t;
+    i = (i - 1) / 2;
+  }
+}
+
+static heap_entry frontier_pop(frontier *f) {
+  const heap_entry top = f->e[0];
+  f->e[0] = f->e[--f->size];
+  for (int64_t i = 0;;) {
+    int64_t m = i;
+    const int64_t l = 2 * i + 1, r = 2 * i + 2;
+    if (l < f->size && entry_before(&f->e[l], &f->e[m])) m = l;
+    if (r < f->size && entry_before(&f->e[r], &f->e[m])) m = r;
+    if (m == i) break;
+    const heap_entry t = f->e[i];
+    f->e[i] = f->e[m];
+    f->e[m] = t;
+    i = m;
+  }
+  return top;
+}
+
+/* Grows cluster 'id' from node 'seed': repeatedly adds the unclustered node most strongly
+ * connected to the cluster, until the cluster weighs 'bound' (when > 0) or has 'cap' nodes, or
+ * no unclustered neighbour is left. 'conn' (n, zero on entry and exit) holds the connections. */
+static void grow_cluster(const hr_graph *g, int32_t seed, int32_t id, double bound, int64_t cap,
+                         int32_t *cluster, double *conn, frontier *f) {
+  double weight = 0.0;
+  int64_t size = 0;
+  f->size = 0;
+  frontier_push(f, seed, 0.0);
+  while (f->size > 0 && !(bound > 0.0 && weight >= bound) && size < cap) {
+    const heap_entry top = frontier_pop(f);
+    if (cluster[top.v] >= 0 || top.key != conn[top.v]) continue; /* taken or stale */
+    cluster[top.v] = id;
+    conn[top.v] = 0.0;
+    weight += g->w[top.v];
+    size++;
+    for (int64_t k = g->xadj[top.v]; k < g->xadj[top.v + 1]; k++) {
+      const int32_t u = g->adj[k];
+      if (cluster[u] >= 0) continue;
+      conn[u] += g->c[k];
+      frontier_push(f, u, conn[u]);
+    }
+  }
+  /* every unclustered node with a connection has an entry left in the heap */
+  for (int64_t i = 0; i < f->size; i++) conn[f->e[i].v] = 0.0;
+}
+
+/* Assigns every node a cluster (in index order of their first nodes); returns the number of
+ * clusters, or -1 when out of memory. */
+static int assign_clusters(const hr_graph *g, int nparts, int32_t *cluster) {
+  double total = 0.0;
+  for (int v = 0; v < g->n; v++) total += g->w[v];
+  const double bound = total / ((double)nparts * CLUSTERS_PER_PART);
+  /* weightless nodes do not fill a cluster, so the node count is bounded as well */
+  int64_t cap = 2 * (int64_t)g->n / ((int64_t)nparts * CLUSTERS_PER_PART);
+  cap = cap > 1 ? cap : 1;
+  /* one cluster pushes at most once per edge end of its nodes, plus its seed */
+  frontier f = {malloc((size_t)(g->xadj[g->n] + 1) * sizeof *f.e), 0, 0};
+  double *conn = calloc((size_t)(g->n > 0 ? g->n : 1), sizeof *conn);
+  int nc = -1;
+  if (f.e && conn) {
+    nc = 0;
+    for (int v = 0; v < g->n; v++) cluster[v] = -1;
+    for (int v = 0; v < g->n; v++)
+      if (cluster[v] < 0) grow_cluster(g, v, nc++, bound, cap, cluster, conn, &f);
+  }
+  free(f.e);
+  free(conn);
+  return nc;
+}
+
+/* The clustered graph: node weights summed over members, edges between clusters summed over the
+ * edges of their members. 'members' lists the nodes by cluster, from 'first' (nc + 1). */
+static int build_clustered(const hr_graph *g, const int32_t *cluster, const int32_t *members,
+                           const int64_t *first, owned_graph *o) {
+  const int nc = o->n;
+  const size_t ncs = (size_t)(nc > 0 ? nc : 1);
+  const size_t m = (size_t)(g->xadj[g->n] > 0 ? g->xadj[g->n] : 1);
+  o->xadj = malloc((ncs + 1) * sizeof *o->xadj);
+  o->adj = malloc(m * sizeof *o->adj); /* never more edges than the original graph */
+  o->w = calloc(ncs, sizeof *o->w);
+  o->c = malloc(m * sizeof *o->c);
+  int64_t *slot = malloc(ncs * sizeof *slot); /* where cluster u is in the current row, or -1 */
+  if (!o->xadj || !o->adj || !o->w || !o->c || !slot) {
+    free(slot);
+    return 0;
+  }
+  for (int u = 0; u < nc; u++) slot[u] = -1;
+  int64_t ne = 0;
+  for (int a = 0; a < nc; a++) {
+    o->xadj[a] = ne;
+    for (int64_t j = first[a]; j < first[a + 1]; j++) {
+      const int32_t v = members[j];
+      o->w[a] += g->w[v];
+      for (int64_t k = g->xadj[v]; k < g->xadj[v + 1]; k++) {
+        const int32_t b = cluster[g->adj[k]];
+        if (b == a) continue;
+        if (slot[b] < 0) slot[b] = ne, o->adj[ne] = b, o->c[ne++] = 0.0;
+        o->c[slot[b]] += g->c[k];
+      }
+    }
+    for (int64_t k = o->xadj[a]; k < ne; k++) slot[o->adj[k]] = -1;
+  }
+  o->xadj[nc] = ne;
+  free(slot);
+  return 1;
+}
+
+/* Each cluster's part: the part holding most of its members' weight (then most members, then
+ * the lowest part), so that the clustered start is as close to the caller's as clusters allow. */
+static int majority_parts(const hr_graph *g, int nparts, const int32_t *part,
+                          const int32_t *members, const int64_t *first, int nc, int32_t *cpart) {
+  double *wsum = calloc((size_t)nparts, sizeof *wsum);
+  int64_t *count = calloc((size_t)nparts, sizeof *count);
+  if (!wsum || !count) {
+    free(wsum);
+    free(count);
+    return 0;
+  }
+  for (int a = 0; a < nc; a++) {
+    int32_t pick = part[members[first[a]]];
+    for (int64_t j = first[a]; j < first[a + 1]; j++) {
+      const int32_t v = members[j], p = part[v];
+      wsum[p] += g->w[v];
+      count[p]++;
+      if (wsum[p] > wsum[pick] || (wsum[p] == wsum[pick] && count[p] > count[pick]) ||
+          (wsum[p] == wsum[pick] && count[p] == count[pick] && p < pick))
+        pick = p;
+    }
+    cpart[a] = pick;
+    for (int64_t j = first[a]; j < first[a + 1]; j++) wsum[part[members[j]]] = 0.0;
+    for (int64_t j = first[a]; j < first[a + 1]; j++) count[part[members[j]]] = 0;
+  }
+  free(wsum);
+  free(count);
+  return 1;
+}
+
+/* Lists the nodes by cluster (a counting sort): members[first[a] .. first[a+1]) are a's. */
+static void sort_members(const int32_t *cluster, int n, int nc, int32_t *members, int64_t *first) {
+  for (int a = 0; a <= nc; a++) first[a] = 0;
+  for (int v = 0; v < n; v++) first[cluster[v] + 1]++;
+  for (int a = 0; a < nc; a++) first[a + 1] += first[a];
+  for (int v = 0; v < n; v++) members[first[cluster[v]]++] = v;
+  for (int a = nc; a > 0; a--) first[a] = first[a - 1];
+  first[0] = 0;
+}
+
+/* Clusters g, anneals the clustered graph from the majority parts of 'part' and writes the
+ * result, projected onto the nodes, into 'out'. Returns 0 when out of memory. */
+static int anneal_clustered(const hr_graph *g, int nparts, double alpha, const int32_t *part,
+                            uint64_t *rng, int32_t *out) {
+  const size_t n = (size_t)(g->n > 0 ? g->n : 1);
+  int32_t *cluster = malloc(n * sizeof *cluster), *members = malloc(n * sizeof *members);
+  int64_t *first = malloc((n + 1) * sizeof *first);
+  int32_t *cpart = malloc(n * sizeof *cpart);
+  owned_graph o = {0};
+  int ok = cluster && members && first && cpart;
+  o.n = ok ? assign_clusters(g, nparts, cluster) : -1;
+  ok = o.n >= 0;
+  if (ok) {
+    sort_members(cluster, g->n, o.n, members, first);
+    ok = build_clustered(g, cluster, members, first, &o) &&
+         majority_parts(g, nparts, part, members, first, o.n, cpart);
+  }
+  if (ok) {
+    const hr_graph cg = owned_view(&o);
+    int64_t moves = (int64_t)COARSE_MOVES_PER_NODE * o.n;
+    moves = moves > COARSE_MOVES_MIN ? moves : COARSE_MOVES_MIN;
+    ok = anneal_graph(&cg, nparts, alpha, cpart, COARSE_HOT, moves, rng);
+  }
+  if (ok)
+    for (int v = 0; v < g->n; v++) out[v] = cpart[cluster[v]];
+  owned_free(&o);
+  free(cluster);
+  free(members);
+  free(first);
+  free(cpart);
+  return ok;
+}
+
+/* ---- the method ---------------------------------------------------------------------------- */
+
+static int valid_input(const hr_graph *g, int nparts, const int32_t *part) {
+  if (!g || !part || g->n < 0 || nparts < 1) return 0;
+  if (g->n > 0 && (!g->xadj || !g->w || g->xadj[0] != 0)) return 0;
+  if (!parts_in_range(part, g->n, nparts)) return 0;
+  for (int v = 0; v < g->n; v++) {
+    if (g->xadj[v + 1] < g->xadj[v]) return 0;
+    for (int64_t k = g->xadj[v]; k < g->xadj[v + 1]; k++)
+      if (g->adj[k] < 0 || g->adj[k] >= g->n) return 0;
+  }
+  return 1;
+}
+
+/* Z and the sum of part costs of 'part' (exact, not incremental); -1 when out of memory. */
+static double exact_cost(const hr_graph *g, const int32_t *part, int nparts, double alpha,
+                         double *sum) {
+  double cut;
+  const double z = hr_partition_cost(g, part, nparts, alpha, &cut, NULL);
+  double wsum = 0.0;
+  for (int v = 0; v < g->n; v++) wsum += g->w[v];
+  *sum = alpha * 2.0 * cut + (1.0 - alpha) * wsum;
+  return z;
+}
+
+int hr_partition_anneal(const hr_graph *g, int nparts, double alpha, uint64_t seed,
+                        int32_t *part) {
+  if (!valid_input(g, nparts, part)) return 0;
+  if (nparts == 1 || g->n == 0) return 1; /* nothing to move */
+  const size_t n = (size_t)g->n;
+  int32_t *start = malloc(n * sizeof *start), *coarse = malloc(n * sizeof *coarse);
+  int ok = start && coarse;
+  uint64_t rng = seed;
+  if (ok) {
+    memcpy(start, part, n * sizeof *part);
+    ok = anneal_clustered(g, nparts, alpha, start, &rng, coarse);
+  }
+  double s_start = 0.0, s_coarse = 0.0, s_end = 0.0;
+  const double z_start = ok ? exact_cost(g, start, nparts, alpha, &s_start) : -1.0;
+  const double z_coarse = ok ? exact_cost(g, coarse, nparts, alpha, &s_coarse) : -1.0;
+  ok = ok && z_start >= 0.0 && z_coarse >= 0.0;
+  /* refine the better of the caller's start and the clustered result: clusters that straddle
+   * the parts of a good start would otherwise cost it its quality */
+  if (ok && is_better(z_coarse, s_coarse, z_start, s_start))
+    memcpy(part, coarse, n * sizeof *part);
+  const int64_t fine_moves = (int64_t)FINE_MOVES_PER_NODE * g->n;
+  if (ok) ok = anneal_graph(g, nparts, alpha, part, FINE_HOT, fine_moves, &rng);
+  const double z_end = ok ? exact_cost(g, part, nparts, alpha, &s_end) : -1.0;
+  ok = ok && z_end >= 0.0;
+  /* the incremental loads drift by rounding; the exact costs have the last word */
+  if (start && (!ok || z_end > z_start)) memcpy(part, start, n * sizeof *part);
+  free(start);
+  free(coarse);
+  return ok;
+}
