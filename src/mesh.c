@@ -742,17 +742,6 @@ static void put_f32(uint8_t *p, float f) {
 
 /* ------------------------------------------------------------------ PLY */
 
-/* Flushes and closes 'fp' (written to 'path'); 'ok' == 0 means an earlier write failed with
- * errno 'e'. On any failure the partial file is removed and HR_ERR_IO names the cause. */
-static hr_status close_checked(FILE *fp, const char *path, int ok, int e, hr_err *err) {
-  if (ok && fflush(fp) != 0) ok = 0, e = errno;
-  if (ok && ferror(fp)) ok = 0, e = errno ? errno : EIO;
-  if (fclose(fp) != 0 && ok) ok = 0, e = errno;
-  if (ok) return HR_OK;
-  remove(path);
-  return hr_err_set(err, HR_ERR_IO, "%s: write failed: %s", path, strerror(e ? e : EIO));
-}
-
 hr_status hr_ply_write(const char *path, const hr_mesh *m, double exposure, hr_err *err) {
   if (!m || !path) return hr_err_set(err, HR_ERR_INVALID, "hr_ply_write: no mesh or path");
   if (!isfinite(exposure) || exposure < 0)
@@ -799,7 +788,7 @@ hr_status hr_ply_write(const char *path, const hr_mesh *m, double exposure, hr_e
     ok = fwrite(buf, 1, (size_t)(p - buf), fp) == (size_t)(p - buf);
     if (!ok) e = errno;
   }
-  return close_checked(fp, path, ok, e, err);
+  return hr_file_close(fp, path, ok, e, err);
 }
 
 /* ------------------------------------------------------------------ GLB */
@@ -955,5 +944,5 @@ hr_status hr_glb_write(const char *path, const hr_mesh *m, double exposure, hr_e
       if (!ok) e = errno;
     }
   }
-  return close_checked(fp, path, ok, e, err);
+  return hr_file_close(fp, path, ok, e, err);
 }

@@ -15,6 +15,8 @@
 #define HR_OUTPUT_H
 
 #include "hrad.h"
+
+#include <stdio.h>
 #include <stdint.h>
 
 /* A triangle mesh over all surfaces. Vertices belong to exactly one input polygon: the surfaces
@@ -110,6 +112,11 @@ hr_status hr_glb_write(const char *path, const hr_mesh *m, double exposure, hr_e
  * absolute; it is read and embedded. three.js is taken from $HRAD_THREE_DIR if set, else from
  * HR_SOURCE_DIR "/node_modules/three"; when missing, HR_ERR_IO with a message naming the path. */
 hr_status hr_viewer_write(const char *path, const char *glb_name, hr_err *err);
+
+/* Flushes and closes 'fp' (written to 'path'); 'ok' == 0 means an earlier write failed with
+ * errno 'e'. On any failure the partial file is removed and HR_ERR_IO names the cause. Every
+ * writer ends with it (output.c). */
+hr_status hr_file_close(FILE *fp, const char *path, int ok, int e, hr_err *err);
 
 /* The three.js directory hr_viewer_write uses (environment override or the built-in path). */
 const char *hr_viewer_three_dir(void);

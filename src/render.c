@@ -399,17 +399,6 @@ hr_status hr_render(const hr_scene *s, const hr_mesh *m, const hr_leaf *leaves, 
 
 /* ------------------------------------------------------------------ image writers */
 
-/* Flushes and closes 'fp' (written to 'path'); 'ok' == 0 means an earlier write failed with
- * errno 'e'. On any failure the partial file is removed and HR_ERR_IO names the cause. */
-static hr_status close_checked(FILE *fp, const char *path, int ok, int e, hr_err *err) {
-  if (ok && fflush(fp) != 0) ok = 0, e = errno;
-  if (ok && ferror(fp)) ok = 0, e = errno ? errno : EIO;
-  if (fclose(fp) != 0 && ok) ok = 0, e = errno;
-  if (ok) return HR_OK;
-  remove(path);
-  return hr_err_set(err, HR_ERR_IO, "%s: write failed: %s", path, strerror(e ? e : EIO));
-}
-
 hr_status hr_png_write(const char *path, int w, int h, const float *rgb, double exposure,
                        hr_err *err) {
   if (!path || !rgb || w < 1 || h < 1)
@@ -469,5 +458,5 @@ hr_status hr_pfm_write(const char *path, int w, int h, const float *rgb, hr_err 
     if (!ok) e = errno;
   }
   free(row);
-  return close_checked(fp, path, ok, e, err);
+  return hr_file_close(fp, path, ok, e, err);
 }

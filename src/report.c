@@ -1,6 +1,7 @@
 /* report.c: surfaces.csv, stats.json and the per-phase timing table (paper 2.3, tables 1-2:
  * init graph, refine, push-pull, sum). The paper's "refine" column covers steps {7..13}, which
  * include do_link; here it is split into refine (subdivision and visibility) and gather. */
+#include "output.h"
 #include "report.h"
 
 #include <errno.h>
@@ -12,17 +13,6 @@ static hr_status open_out(const char *path, FILE **f, hr_err *err) {
   return HR_OK;
 }
 
-/* Checks everything written to 'f' (the stream's error flag, the flush, the close); on failure
- * removes the partial file and names the cause. */
-static hr_status close_out(const char *path, FILE *f, hr_err *err) {
-  int ok = 1, e = 0;
-  if (fflush(f) != 0) ok = 0, e = errno;
-  if (ok && ferror(f)) ok = 0, e = errno ? errno : EIO;
-  if (fclose(f) != 0 && ok) ok = 0, e = errno;
-  if (ok) return HR_OK;
-  remove(path);
-  return hr_err_set(err, HR_ERR_IO, "%s: write failed: %s", path, strerror(e ? e : EIO));
-}
 
 /* Writes 's' as a JSON string (quoted, with '"', '\\' and control characters escaped): scene
  * names come from file names, which may hold any of them. */
@@ -61,7 +51,7 @@ hr_status hr_report_csv(const char *path, const hr_solver *s, hr_err *err) {
     else
       fprintf(f, "degenerate\n");
   }
-  return close_out(path, f, err);
+  return hr_file_close(f, path, 1, 0, err);
 }
 
 hr_status hr_report_json(const char *path, const hr_solver *s, const hr_options *o,
@@ -102,7 +92,7 @@ hr_status hr_report_json(const char *path, const hr_solver *s, const hr_options 
           t.time_s.init_graph, t.time_s.refine, t.time_s.gather, t.time_s.push_pull,
           t.time_s.total);
   fprintf(f, "}\n");
-  return close_out(path, f, err);
+  return hr_file_close(f, path, 1, 0, err);
 }
 
 void hr_report_table(FILE *f, const hr_stats *t) {

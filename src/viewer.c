@@ -281,13 +281,7 @@ hr_status hr_viewer_write(const char *path, const char *glb_name, hr_err *err) {
     fputs("\";\n</script>\n", fp);
     if (ok) ok = fputs(PAGE_SCRIPT, fp) >= 0;
     if (!ok && !e) e = errno;
-    if (ok && fflush(fp) != 0) ok = 0, e = errno;
-    if (ok && ferror(fp)) ok = 0, e = errno ? errno : EIO;
-    if (fclose(fp) != 0 && ok) ok = 0, e = errno;
-    if (!ok) {
-      remove(path);
-      st = hr_err_set(err, HR_ERR_IO, "%s: write failed: %s", path, strerror(e ? e : EIO));
-    }
+    st = hr_file_close(fp, path, ok, e, err);
   }
   for (int i = 0; i < NMODS; i++) free(src[i]);
   free(lic);
