@@ -280,20 +280,29 @@ int hr_dist_any(const hr_dist *d, int flag);
 hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uint64_t scatter,
                              hr_err *err);
 
-/* Moves every element to rank owner[e] (indexed like the solver's elements, the same array on
- * every rank; hr_solver_elements gives their count) with the links it receives, between
- * iterations: a collective. The result of the run does not change (graph balancing, paper
- * 2.2.5, uses it). HR_ERR_INVALID for a bad owner or a solver that is not distributed. */
-hr_status hr_solver_migrate(hr_solver *s, const int32_t *owner, hr_err *err);
-/* How many elements (all nodes of all trees) the solver holds now. */
-int64_t hr_solver_elements(const hr_solver *s);
+/* Moves elements to other ranks with the links they receive, between iterations: a collective
+ * (every rank passes the same arrays). The element with global id gids[i] and every element
+ * below it go to rank ranks[i], the deepest listed ancestor deciding; elements below no listed
+ * gid go with their surface's root (hr_solver_set_dist). Global ids: hr_solver_leaf_gid. The
+ * result of the run does not change (graph balancing, paper 2.2.5, uses it). HR_ERR_INVALID for
+ * a bad gid or rank or a solver that is not distributed. */
+hr_status hr_solver_migrate(hr_solver *s, const uint64_t *gids, const int32_t *ranks, int64_t n,
+                            hr_err *err);
+/* Distributed runs: brings every leaf to rank 0 (a collective), where hr_solver_leaves then
+ * returns all of them; call it after hr_solver_run (and in the iteration callback before
+ * per-iteration pictures). A no-op in one process. */
+hr_status hr_solver_collect(hr_solver *s, hr_err *err);
 
 /* One rank's share of a distributed run (hr_solver_rank_stats). */
 typedef struct hr_rank_stats {
   int rank;
   int surfaces;          /* surfaces (element trees) it owns */
   int64_t links;         /* links it holds (live) */
-  int64_t leaves;        /* leaf elements of its surfaces */
+  int64_t leaves;        /* leaf elements it owns */
+  int64_t elements;      /* elements (tree nodes) it owns */
+  int64_t ghosts;        /* other ranks' elements it holds a copy of */
+  double elem_mb, link_mb; /* memory of its elements (own and ghosts) and of its links */
+  int64_t msgs, msg_bytes; /* point-to-point message batches and bytes it sent */
   int64_t rays;          /* rays it cast */
   int64_t mpi_calls;     /* collectives it took part in */
   int64_t mpi_bytes;     /* bytes it sent in them */

@@ -93,11 +93,6 @@ typedef struct link_rec {
   int32_t ncand;
 } link_rec;
 
-static int cmp_u64_idx(const void *a, const void *b) {
-  const uint64_t *x = a, *y = b;
-  return x[0] < y[0] ? -1 : x[0] > y[0];
-}
-
 static int cmp_link_key(const void *a, const void *b) {
   const uint64_t *x = a, *y = b;
   if (x[0] != y[0]) return x[0] < y[0] ? -1 : 1;
@@ -157,40 +152,73 @@ static hr_status gather_links(const hr_solver *s, char **buf, int64_t *bytes, hr
   return st;
 }
 
+/* A stored element: its gid and state. */
+typedef struct gid_rec {
+  uint64_t gid;
+  elem_rec r;
+} gid_rec;
+
+static int cmp_gid_rec(const void *a, const void *b) {
+  const gid_rec *x = a, *y = b;
+  return x->gid < y->gid ? -1 : x->gid > y->gid;
+}
+
+/* This rank's own elements as the file stores them; 0 when out of memory. */
+static int pack_elements(const hr_solver *s, char **out, int64_t *bytes) {
+  int64_t n = 0;
+  for (int64_t e = 0; e < s->nel; e++) n += hr_owns(s, e);
+  gid_rec *g = malloc((size_t)(n > 0 ? n : 1) * sizeof *g);
+  if (!g) return 0;
+  n = 0;
+  for (int64_t e = 0; e < s->nel; e++) {
+    if (!hr_owns(s, e)) continue;
+    gid_rec *r = &g[n++];
+    memset(r, 0, sizeof *r);
+    r->gid = s->el[e].gid;
+    memcpy(r->r.B, s->B[e], sizeof r->r.B);
+    memcpy(r->r.Bs, s->Bs[e], sizeof r->r.Bs);
+    r->r.bref = s->bref[e], r->r.bvar = s->bvar[e], r->r.open = s->open[e];
+  }
+  *out = (char *)g;
+  *bytes = n * (int64_t)sizeof *g;
+  return 1;
+}
+
 hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err) {
   if (!s->started)
     return hr_err_set(err, HR_ERR_INVALID, "%s: nothing to save before the first iteration", path);
-  /* The links: this rank's, and in a distributed run everybody's on rank 0, which writes. */
-  char *lb = NULL;
-  int64_t lbytes = 0;
-  hr_status st = pack_links(s, &lb, &lbytes) ? HR_OK : hr_err_set(err, HR_ERR_NOMEM,
-                                                                  "out of memory writing %s", path);
+  /* Elements and links: this rank's own, and in a distributed run everybody's on rank 0, which
+   * writes. */
+  char *lb = NULL, *eb = NULL;
+  int64_t lbytes = 0, ebytes = 0;
+  hr_status st = pack_links(s, &lb, &lbytes) && pack_elements(s, &eb, &ebytes)
+                     ? HR_OK
+                     : hr_err_set(err, HR_ERR_NOMEM, "out of memory writing %s", path);
   if (s->dist && (st = hr_dist_agree(s, st, err)) == HR_OK) st = gather_links(s, &lb, &lbytes, err);
+  if (s->dist && st == HR_OK) st = gather_links(s, &eb, &ebytes, err);
   if (st != HR_OK || s->rank != 0) {
-    free(lb);
+    free(lb), free(eb);
     return st;
   }
-  /* Canonical orders: (gid, idx) pairs for elements, (receiver gid, source gid, offset) for the
-   * live links. */
-  int64_t nl = 0;
+  /* Canonical orders: gid for elements, (receiver gid, source gid, offset) for the live
+   * links. */
+  int64_t nl = 0, ne = ebytes / (int64_t)sizeof(gid_rec);
+  gid_rec *ek = (gid_rec *)eb;
+  qsort(ek, (size_t)ne, sizeof *ek, cmp_gid_rec);
   for (int64_t o = 0; o < lbytes; nl++) {
     link_rec r;
     memcpy(&r, lb + o, sizeof r);
     o += (int64_t)sizeof r + 4 * (int64_t)(r.ncand > 0 ? r.ncand : 0);
   }
-  uint64_t(*ek)[2] = malloc((size_t)s->nel * sizeof *ek);
   uint64_t(*lk)[3] = malloc((size_t)(nl > 0 ? nl : 1) * sizeof *lk);
   char tmp[4200];
   snprintf(tmp, sizeof tmp, "%s.tmp", path);
   writer w = {NULL, 0, 0};
-  if (!ek || !lk) {
-    free(ek);
-    free(lk);
+  if (!lk) {
+    free(eb);
     free(lb);
     return hr_err_set(err, HR_ERR_NOMEM, "out of memory writing %s", path);
   }
-  for (int64_t e = 0; e < s->nel; e++) ek[e][0] = s->el[e].gid, ek[e][1] = (uint64_t)e;
-  qsort(ek, (size_t)s->nel, sizeof *ek, cmp_u64_idx);
   for (int64_t o = 0, i = 0; o < lbytes; i++) {
     link_rec r;
     memcpy(&r, lb + o, sizeof r);
@@ -200,7 +228,7 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
   qsort(lk, (size_t)nl, sizeof *lk, cmp_link_key);
   w.f = fopen(tmp, "wb");
   if (!w.f) {
-    free(ek);
+    free(eb);
     free(lk);
     free(lb);
     return hr_err_set(err, HR_ERR_IO, "%s: cannot write: %s", tmp, strerror(errno));
@@ -218,15 +246,10 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
                  s->bf_e,       s->unit,      s->prev_change, s->prev_abs,
                  s->stall,      rays,         init,           s->t};
   put(&w, &pr, sizeof pr);
-  put(&w, &s->nel, sizeof s->nel);
-  for (int64_t i = 0; i < s->nel; i++) {
-    const int64_t e = (int64_t)ek[i][1];
-    elem_rec r;
-    memcpy(r.B, s->B[e], sizeof r.B);
-    memcpy(r.Bs, s->Bs[e], sizeof r.Bs);
-    r.bref = s->bref[e], r.bvar = s->bvar[e], r.open = s->open[e];
-    put(&w, &ek[i][0], sizeof ek[i][0]);
-    put(&w, &r, sizeof r);
+  put(&w, &ne, sizeof ne);
+  for (int64_t i = 0; i < ne; i++) {
+    put(&w, &ek[i].gid, sizeof ek[i].gid);
+    put(&w, &ek[i].r, sizeof ek[i].r);
   }
   put(&w, &nl, sizeof nl);
   for (int64_t i = 0; i < nl; i++) {
@@ -237,7 +260,7 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
   }
   const uint64_t sum = w.h;
   put(&w, &sum, sizeof sum);
-  free(ek);
+  free(eb);
   free(lk);
   free(lb);
   int bad = w.bad || fflush(w.f) != 0 || ferror(w.f);
@@ -460,7 +483,9 @@ hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err) {
   /* the file's counts are totals over the ranks: rank 0 carries them */
   if (s->rank != 0) s->rays = 0, s->initial_links = 0;
   hr_solver_sync_counts(s);
-  return HR_OK;
+  /* every rank holds every element now, with its state from the file: its ghosts of sources
+   * subscribe at their owners */
+  return hr_link_subscribe(s, err);
 }
 
 /* hr_solver_resume on this rank: elements, state, and the links of the elements it owns. */

@@ -38,6 +38,67 @@ static void elem_geometry(const hr_scene *sc, hr_elem *e) {
   e->area = 0.5 * v3_len(cr);
 }
 
+/* ---------------------------------------------------------------- gid -> idx */
+
+static void gmap_put(hr_solver *s, uint64_t gid, int32_t idx) {
+  size_t i = (size_t)u64_mix(gid) & (size_t)(s->gcap - 1);
+  while (s->gkey[i] && s->gkey[i] != gid) i = (i + 1) & (size_t)(s->gcap - 1);
+  s->gkey[i] = gid; /* gids are never 0: the heap index has a sentinel bit */
+  s->gval[i] = idx;
+}
+
+int32_t hr_elem_find(const hr_solver *s, uint64_t gid) {
+  size_t i = (size_t)u64_mix(gid) & (size_t)(s->gcap - 1);
+  while (s->gkey[i]) {
+    if (s->gkey[i] == gid) return s->gval[i];
+    i = (i + 1) & (size_t)(s->gcap - 1);
+  }
+  return -1;
+}
+
+/* At least 'slots' slots (rounded up to a power of 2), rehashing the elements held. */
+static int gmap_grow(hr_solver *s, int64_t slots) {
+  if (slots <= s->gcap) return 1;
+  int64_t nc = 64;
+  while (nc < slots) nc *= 2;
+  uint64_t *k = calloc((size_t)nc, sizeof *k);
+  int32_t *v = malloc((size_t)nc * sizeof *v);
+  if (!k || !v) {
+    free(k), free(v);
+    return 0;
+  }
+  free(s->gkey), free(s->gval);
+  s->gkey = k, s->gval = v, s->gcap = nc;
+  for (int64_t e = 0; e < s->nel; e++) gmap_put(s, s->el[e].gid, (int32_t)e);
+  return 1;
+}
+
+/* ---------------------------------------------------------------- ownership */
+
+int32_t hr_owner_of(const hr_solver *s, uint64_t gid) {
+  if (!s->dist) return 0;
+  if (s->own_seed) { /* splitmix64 of (seed, gid) */
+    uint64_t z = s->own_seed ^ (gid * UINT64_C(0x9e3779b97f4a7c15));
+    z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
+    z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
+    return (int32_t)((z ^ (z >> 31)) % (uint64_t)s->nranks);
+  }
+  const uint64_t pathmask = (UINT64_C(1) << HR_GID_PATH_BITS) - 1, top = gid & ~pathmask;
+  for (uint64_t h = gid & pathmask; h >= 1 && s->nomap > 0; h >>= 2) {
+    int64_t lo = 0, hi = s->nomap; /* binary search of top | h */
+    const uint64_t g = top | h;
+    while (lo < hi) {
+      int64_t m = (lo + hi) / 2;
+      if (s->omap[m][0] < g) lo = m + 1;
+      else hi = m;
+    }
+    if (lo < s->nomap && s->omap[lo][0] == g) return (int32_t)s->omap[lo][1];
+  }
+  return s->rootown[gid >> HR_GID_PATH_BITS];
+}
+
+/* ---------------------------------------------------------------- storage */
+
 static int reserve(hr_solver *s, int64_t need) {
   if (need <= s->cap_el) return 1;
   int64_t nc = s->cap_el ? s->cap_el : 64;
@@ -78,6 +139,10 @@ static int reserve(hr_solver *s, int64_t need) {
   int32_t *ow = realloc(s->eown, (size_t)nc * sizeof *ow);
   if (!ow) return 0;
   s->eown = ow;
+  uint8_t *sb = realloc(s->esub, (size_t)nc);
+  if (!sb) return 0;
+  s->esub = sb;
+  if (!gmap_grow(s, 2 * nc)) return 0;
 
   s->cap_el = nc;
   return 1;
@@ -91,6 +156,8 @@ hr_status hr_elem_init(hr_solver *s) {
     memset(e, 0, sizeof *e);
     e->gid = ((uint64_t)i << HR_GID_PATH_BITS) | 1u;
     s->eown[i] = 0; /* hr_solver_set_dist spreads them */
+    s->esub[i] = 0;
+    gmap_put(s, e->gid, i);
     e->surf = i;
     e->parent = -1;
     e->child = -1;
@@ -185,11 +252,27 @@ hr_status hr_elem_subdivide(hr_solver *s, int32_t idx) {
     s->bref[first + k] = s->bref[idx];
     s->bvar[first + k] = 0;
     s->open[first + k] = s->open[idx]; /* hr_elem_open, after the round's subdivisions */
-    s->eown[first + k] = hr_elem_owner(s, first + k, idx);
+    s->eown[first + k] = hr_owner_of(s, e->gid);
+    s->esub[first + k] = 0;
+    gmap_put(s, e->gid, first + k);
   }
   p->child = first;
   s->nel += 4;
   return HR_OK;
+}
+
+int32_t hr_elem_ensure(hr_solver *s, uint64_t gid) {
+  int32_t e = hr_elem_find(s, gid);
+  if (e >= 0) return e;
+  const uint64_t pathmask = (UINT64_C(1) << HR_GID_PATH_BITS) - 1;
+  const uint64_t heap = gid & pathmask, surf = gid >> HR_GID_PATH_BITS;
+  if (surf >= (uint64_t)s->scene->nsurfs || heap < 4) return -1;
+  const int32_t parent = hr_elem_ensure(s, (gid & ~pathmask) | (heap >> 2));
+  if (parent < 0) return parent;
+  if (s->el[parent].child >= 0) return -1; /* its children exist, and 'gid' is none of them */
+  if (s->el[parent].depth >= HR_GID_DEPTH) return -1;
+  if (hr_elem_subdivide(s, parent) != HR_OK) return -2;
+  return hr_elem_find(s, gid);
 }
 
 /* Points per side for the open fraction: roots are whole input surfaces, where a box standing on
@@ -200,6 +283,7 @@ hr_status hr_elem_subdivide(hr_solver *s, int32_t idx) {
 void hr_elem_open(hr_solver *s, int64_t lo, int64_t hi) {
 #pragma omp parallel for schedule(dynamic, 64) if (hi - lo > 256)
   for (int64_t e = lo; e < hi; e++) {
+    if (e >= s->scene->nsurfs && !hr_owns(s, e)) continue; /* a ghost: its owner's business */
     /* A child of a wholly open element is wholly open. */
     if (s->el[e].parent >= 0 && s->open[s->el[e].parent] == 1) {
       s->open[e] = 1;

@@ -441,15 +441,223 @@ static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uin
   return failed == 2 ? HR_ERR_TOO_BIG : failed ? HR_ERR_NOMEM : HR_OK;
 }
 
-/* Distributed refinement: the children of a link split on its receiver side may be received by
- * elements of other ranks; each goes to its receiver's owner with its candidate list (the record,
- * then ncand int32 blocker ids). The links that stay keep their place; the received ones are
- * appended in rank order (order does not matter: see send_to_owners). A collective: 'st' is
- * this rank's status so far, and every rank returns the same status (a pool that cannot hold the
- * received lists fails locally, and the next collective tells the others). */
+/* ---------------------------------------------------------------- distribution */
+
 /* Candidates a link carries: none until its list is built (NO_LIST). */
 static int32_t ncands(const hr_link *l) { return l->ncand > 0 ? l->ncand : 0; }
 
+/* What a ghost of a source needs (see pushpull.c, msg_store): its Bs and bvar, and its
+ * children's when it has some. */
+typedef struct src_state {
+  uint64_t nchild;
+  double Bs[3], bvar;
+  double cBs[4][3], cbvar[4];
+} src_state;
+
+static void src_state_get(const hr_solver *s, int32_t e, src_state *st) {
+  memset(st, 0, sizeof *st);
+  memcpy(st->Bs, s->Bs[e], sizeof st->Bs);
+  st->bvar = s->bvar[e];
+  const int32_t c = s->el[e].child;
+  if (c < 0) return;
+  st->nchild = 4;
+  for (int k = 0; k < 4; k++) {
+    memcpy(st->cBs[k], s->Bs[c + k], sizeof st->cBs[k]);
+    st->cbvar[k] = s->bvar[c + k];
+  }
+}
+
+/* Sets element 'e' from 'st', creating its children if it has some; own elements are left
+ * alone unless 'force'. 0 when out of memory. */
+static int src_state_set(hr_solver *s, int32_t e, const src_state *st, int force) {
+  if (hr_owns(s, e) && !force) return 1;
+  memcpy(s->Bs[e], st->Bs, sizeof st->Bs);
+  s->bvar[e] = st->bvar;
+  if (!st->nchild) return 1;
+  if (s->el[e].child < 0 && hr_elem_subdivide(s, e) != HR_OK) return 0;
+  const int32_t c = s->el[e].child;
+  for (int k = 0; k < 4; k++) {
+    if (hr_owns(s, c + k)) continue;
+    memcpy(s->Bs[c + k], st->cBs[k], sizeof st->cBs[k]);
+    s->bvar[c + k] = st->cbvar[k];
+  }
+  return 1;
+}
+
+/* A personalised exchange of fixed-size records: rec[i] (rsize bytes) goes to rank dest[i];
+ * '*recv' gets what arrived, '*nrecv' records. A collective; every rank gets the same status
+ * ('st' is this rank's so far). */
+static hr_status exchange(hr_solver *s, const char *rec, const int32_t *dest, int64_t n,
+                          size_t rsize, char **recv, int64_t *nrecv, hr_status st, hr_err *err) {
+  const int P = s->nranks;
+  *recv = NULL;
+  *nrecv = 0;
+  int64_t *sb = calloc((size_t)P, sizeof *sb), *at = calloc((size_t)P + 1, sizeof *at);
+  char *out = malloc((size_t)n * rsize + 1);
+  if (!sb || !at || !out) st = HR_ERR_NOMEM;
+  if ((st = hr_dist_agree(s, st == HR_OK ? st : hr_err_set(err, st, "out of memory"), err))) {
+    free(sb), free(at), free(out);
+    return st;
+  }
+  for (int64_t i = 0; i < n; i++) sb[dest[i]] += (int64_t)rsize;
+  for (int p = 0; p < P; p++) at[p + 1] = at[p] + sb[p];
+  for (int64_t i = 0; i < n; i++) {
+    memcpy(out + at[dest[i]], rec + (size_t)i * rsize, rsize);
+    at[dest[i]] += (int64_t)rsize;
+  }
+  void *r = NULL;
+  int64_t tot = 0;
+  st = hr_dist_alltoall(s->dist, out, sb, &r, &tot);
+  free(sb), free(at), free(out);
+  if (st != HR_OK) return hr_err_set(err, st, "out of memory");
+  *recv = r;
+  *nrecv = tot / (int64_t)rsize;
+  return HR_OK;
+}
+
+/* A subscription: rank 'rank' holds a ghost of element 'gid' and wants its stores; the answer
+ * is the element's state now. */
+typedef struct msg_sub {
+  uint64_t gid;
+  int64_t rank;
+} msg_sub;
+
+typedef struct msg_state {
+  uint64_t gid;
+  src_state st;
+} msg_state;
+
+static int subs_push(hr_solver *s, int32_t e, int32_t rank) {
+  if (s->nsubs == s->cap_subs) {
+    int64_t nc = s->cap_subs ? 2 * s->cap_subs : 1024;
+    int32_t(*sb)[2] = realloc(s->subs, (size_t)nc * sizeof *sb);
+    if (!sb) return 0;
+    s->subs = sb, s->cap_subs = nc;
+  }
+  s->subs[s->nsubs][0] = e;
+  s->subs[s->nsubs++][1] = rank;
+  return 1;
+}
+
+/* Applies received element states to the ghosts they name. */
+static hr_status apply_states(hr_solver *s, const char *in, int64_t nin, hr_status st,
+                              hr_err *err) {
+  for (int64_t i = 0; i < nin && st == HR_OK; i++) {
+    msg_state m;
+    memcpy(&m, in + i * (int64_t)sizeof m, sizeof m);
+    const int32_t e = hr_elem_ensure(s, m.gid);
+    if (e < 0 || !src_state_set(s, e, &m.st, 0))
+      st = hr_err_set(err, HR_ERR_NOMEM, "out of memory (element states)");
+  }
+  return st;
+}
+
+/* Every ghost source of links[0, n) that this rank has not subscribed to yet subscribes at its
+ * owner and gets the owner's state of it now (the paper's "search" and "fetch": a rank decides
+ * about a link only with its source's current state, and every later push-pull stores it). A
+ * collective. */
+static hr_status subscribe_range(hr_solver *s, const hr_link *links, int64_t nl, hr_err *err) {
+  int64_t n = 0, cap = 0;
+  msg_sub *rec = NULL;
+  int32_t *dest = NULL;
+  hr_status st = HR_OK;
+  for (int64_t i = 0; i < nl && st == HR_OK; i++) {
+    const int32_t j = links[i].s;
+    if (links[i].Fu < 0 || hr_owns(s, j) || s->esub[j]) continue;
+    if (n == cap) {
+      cap = cap ? 2 * cap : 1024;
+      msg_sub *r2 = realloc(rec, (size_t)cap * sizeof *r2);
+      int32_t *d2 = realloc(dest, (size_t)cap * sizeof *d2);
+      if (r2) rec = r2;
+      if (d2) dest = d2;
+      if (!r2 || !d2) st = HR_ERR_NOMEM;
+      if (st != HR_OK) break;
+    }
+    s->esub[j] = 1;
+    rec[n] = (msg_sub){s->el[j].gid, s->rank};
+    dest[n++] = s->eown[j];
+  }
+  char *in = NULL;
+  int64_t nin = 0;
+  st = exchange(s, (const char *)rec, dest, st == HR_OK ? n : 0, sizeof *rec, &in, &nin, st,
+                err);
+  free(rec), free(dest);
+  if (st != HR_OK) return st;
+  msg_state *ans = malloc((size_t)(nin > 0 ? nin : 1) * sizeof *ans);
+  int32_t *adest = malloc((size_t)(nin > 0 ? nin : 1) * sizeof *adest);
+  if (!ans || !adest) st = hr_err_set(err, HR_ERR_NOMEM, "out of memory (subscriptions)");
+  for (int64_t i = 0; i < nin && st == HR_OK; i++) {
+    msg_sub m;
+    memcpy(&m, in + i * (int64_t)sizeof m, sizeof m);
+    const int32_t e = hr_elem_find(s, m.gid);
+    if (e < 0 || !hr_owns(s, e)) { /* cannot happen: owners hold what they own */
+      st = hr_err_set(err, HR_ERR_INVALID, "internal error: subscription to %llx",
+                      (unsigned long long)m.gid);
+      break;
+    }
+    if (!subs_push(s, e, (int32_t)m.rank))
+      st = hr_err_set(err, HR_ERR_NOMEM, "out of memory (subscriptions)");
+    memset(&ans[i], 0, sizeof ans[i]);
+    ans[i].gid = m.gid;
+    src_state_get(s, e, &ans[i].st);
+    adest[i] = (int32_t)m.rank;
+  }
+  free(in);
+  st = exchange(s, (const char *)ans, adest, st == HR_OK ? nin : 0, sizeof *ans, &in, &nin, st,
+                err);
+  free(ans), free(adest);
+  if (st != HR_OK) return st;
+  st = apply_states(s, in, nin, st, err);
+  free(in);
+  return hr_dist_agree(s, st, err);
+}
+
+hr_status hr_link_subscribe(hr_solver *s, hr_err *err) {
+  if (!s->dist) return HR_OK;
+  return subscribe_range(s, s->links, s->nlinks, err);
+}
+
+/* After a refinement round: the subscribers of every own element split in it (split[e] != 0)
+ * learn of its children at once, since the next round's decisions and the next gather read
+ * them (links with source shares gather the children). A collective. */
+static hr_status notify_splits(hr_solver *s, const uint8_t *split, hr_err *err) {
+  int64_t n = 0;
+  for (int64_t i = 0; i < s->nsubs; i++) n += split[s->subs[i][0]];
+  msg_state *rec = malloc((size_t)(n > 0 ? n : 1) * sizeof *rec);
+  int32_t *dest = malloc((size_t)(n > 0 ? n : 1) * sizeof *dest);
+  hr_status st = rec && dest ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  n = 0;
+  for (int64_t i = 0; i < s->nsubs && st == HR_OK; i++) {
+    const int32_t e = s->subs[i][0];
+    if (!split[e]) continue;
+    memset(&rec[n], 0, sizeof rec[n]);
+    rec[n].gid = s->el[e].gid;
+    src_state_get(s, e, &rec[n].st);
+    dest[n++] = s->subs[i][1];
+  }
+  char *in = NULL;
+  int64_t nin = 0;
+  st = exchange(s, (const char *)rec, dest, st == HR_OK ? n : 0, sizeof *rec, &in, &nin, st, err);
+  free(rec), free(dest);
+  if (st != HR_OK) return st;
+  st = apply_states(s, in, nin, st, err);
+  free(in);
+  return hr_dist_agree(s, st, err);
+}
+
+/* A link on its way to its receiver's owner: ids instead of local indices, then ncand int32
+ * candidates. Its source's state comes from the source's owner (subscribe_range). */
+typedef struct msg_link {
+  uint64_t r, s;
+  float F, Fu, dF, dS, w[4];
+  int32_t ncand, pad;
+} msg_link;
+
+/* Distributed refinement: the children of a link split on its receiver side may be received by
+ * elements of other ranks; each goes to its receiver's owner with its candidate list. The links
+ * that stay keep their place; the received ones are appended in rank order (order does not
+ * matter: hr_link_sort orders each receiver's links by source gid). A collective: 'st' is this
+ * rank's status so far, and every rank returns the same status. */
 static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_status st,
                              hr_err *err) {
   if ((st = hr_dist_agree(s, st, err)) != HR_OK) return st;
@@ -462,7 +670,7 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
   if (sb && at) {
     for (int64_t i = 0; i < n; i++) {
       const int d = s->eown[cur[i].r];
-      if (d != s->rank) sb[d] += (int64_t)sizeof(hr_link) + 4 * (int64_t)ncands(&cur[i]);
+      if (d != s->rank) sb[d] += (int64_t)sizeof(msg_link) + 4 * (int64_t)ncands(&cur[i]);
     }
     for (int p = 0; p < P; p++) at[p + 1] = at[p] + sb[p];
     out = malloc((size_t)(at[P] > 0 ? at[P] : 1));
@@ -473,15 +681,21 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
     return st;
   }
   for (int64_t i = 0; i < n; i++) {
-    const int d = s->eown[cur[i].r];
+    const hr_link *l = &cur[i];
+    const int d = s->eown[l->r];
     if (d == s->rank) {
       cur[nstay++] = cur[i];
       continue;
     }
-    memcpy(out + at[d], &cur[i], sizeof(hr_link));
-    at[d] += (int64_t)sizeof(hr_link);
-    const size_t cb = 4 * (size_t)ncands(&cur[i]);
-    if (cb) memcpy(out + at[d], s->pool + cur[i].cand_off, cb);
+    msg_link m;
+    memset(&m, 0, sizeof m);
+    m.r = s->el[l->r].gid, m.s = s->el[l->s].gid;
+    m.F = l->F, m.Fu = l->Fu, m.dF = l->dF, m.dS = l->dS, m.ncand = l->ncand;
+    memcpy(m.w, l->w, sizeof m.w);
+    memcpy(out + at[d], &m, sizeof m);
+    at[d] += (int64_t)sizeof m;
+    const size_t cb = 4 * (size_t)ncands(l);
+    if (cb) memcpy(out + at[d], s->pool + l->cand_off, cb);
     at[d] += (int64_t)cb;
   }
   void *recv = NULL;
@@ -492,10 +706,10 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
   /* unpack: count, make room, copy */
   int64_t nr = 0, nc = 0;
   for (int64_t o = 0; o < tot; nr++) {
-    hr_link l;
-    memcpy(&l, (char *)recv + o, sizeof l);
-    o += (int64_t)sizeof l + 4 * (int64_t)ncands(&l);
-    nc += ncands(&l);
+    msg_link m;
+    memcpy(&m, (char *)recv + o, sizeof m);
+    o += (int64_t)sizeof m + 4 * (int64_t)(m.ncand > 0 ? m.ncand : 0);
+    nc += m.ncand > 0 ? m.ncand : 0;
   }
   hr_link *grown = realloc(cur, (size_t)(nstay + nr > 0 ? nstay + nr : 1) * sizeof *grown);
   if (!grown || s->npool + nc > POOL_MAX ||
@@ -507,64 +721,196 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
                       "refinement exceeds a limit or is out of memory");
   }
   cur = grown;
-  for (int64_t o = 0, k = nstay; o < tot; k++) {
-    memcpy(&cur[k], (char *)recv + o, sizeof(hr_link));
-    o += (int64_t)sizeof(hr_link);
-    const size_t cb = 4 * (size_t)ncands(&cur[k]);
-    cur[k].cand_off = (uint32_t)s->npool;
+  int bad = 0;
+  int64_t k = nstay;
+  for (int64_t o = 0; o < tot && !bad; k++) {
+    msg_link m;
+    memcpy(&m, (char *)recv + o, sizeof m);
+    o += (int64_t)sizeof m;
+    const int32_t r = hr_elem_find(s, m.r), j = hr_elem_ensure(s, m.s);
+    if (r < 0 || !hr_owns(s, r) || j < 0) {
+      bad = 1;
+      break;
+    }
+    hr_link *l = &cur[k];
+    *l = (hr_link){.r = r, .s = j, .F = m.F, .Fu = m.Fu, .dF = m.dF, .dS = m.dS,
+                   .cand_off = (uint32_t)s->npool, .ncand = m.ncand};
+    memcpy(l->w, m.w, sizeof l->w);
+    const size_t cb = 4 * (size_t)(m.ncand > 0 ? m.ncand : 0);
     if (cb) memcpy(s->pool + s->npool, (char *)recv + o, cb);
-    s->npool += ncands(&cur[k]);
+    s->npool += m.ncand > 0 ? m.ncand : 0;
     o += (int64_t)cb;
   }
   free(recv);
   *pcur = cur;
-  *pn = nstay + nr;
-  return HR_OK;
+  *pn = k;
+  return bad ? hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement") : HR_OK;
 }
 
-/* Moves links to the owners of their receivers after s->eown changed (hr_solver_migrate): the
- * dead ones are dropped, the others routed; the next hr_link_sort groups them afresh. A
- * collective. */
+/* An element moving to a new owner (hr_link_migrate) with what its owner keeps of it. */
+typedef struct msg_move {
+  uint64_t gid;
+  double B[3], bref, open;
+  src_state st; /* Bs, bvar, and its children's (for its subscribers) */
+} msg_move;
+
+/* Sends this rank's elements whose owner changed (old: the owners before) to the new owners,
+ * which take them over (with their children, as ghosts where they own none). */
+static hr_status move_elements(hr_solver *s, const int32_t *old, hr_err *err) {
+  int64_t n = 0;
+  for (int64_t e = 0; e < s->nel; e++) n += old[e] == s->rank && s->eown[e] != s->rank;
+  msg_move *rec = malloc((size_t)(n > 0 ? n : 1) * sizeof *rec);
+  int32_t *dest = malloc((size_t)(n > 0 ? n : 1) * sizeof *dest);
+  hr_status st = rec && dest ? HR_OK : HR_ERR_NOMEM;
+  n = 0;
+  for (int64_t e = 0; e < s->nel && st == HR_OK; e++) {
+    if (old[e] != s->rank || s->eown[e] == s->rank) continue;
+    msg_move *m = &rec[n];
+    memset(m, 0, sizeof *m);
+    m->gid = s->el[e].gid;
+    memcpy(m->B, s->B[e], sizeof m->B);
+    m->bref = s->bref[e], m->open = s->open[e];
+    src_state_get(s, (int32_t)e, &m->st);
+    dest[n++] = s->eown[e];
+  }
+  char *in = NULL;
+  int64_t nin = 0;
+  st = exchange(s, (const char *)rec, dest, st == HR_OK ? n : 0, sizeof *rec, &in, &nin, st, err);
+  free(rec), free(dest);
+  for (int64_t i = 0; i < nin && st == HR_OK; i++) {
+    msg_move m;
+    memcpy(&m, in + i * (int64_t)sizeof m, sizeof m);
+    const int32_t e = hr_elem_ensure(s, m.gid);
+    if (e < 0 || !src_state_set(s, e, &m.st, 1)) {
+      st = hr_err_set(err, HR_ERR_NOMEM, "out of memory moving elements");
+      break;
+    }
+    memcpy(s->B[e], m.B, sizeof m.B);
+    s->bref[e] = m.bref, s->open[e] = m.open;
+  }
+  free(in);
+  return hr_dist_agree(s, st, err);
+}
+
+/* Moves elements and links to their owners after the owner function changed (hr_solver_migrate,
+ * the test hook): own elements to their new owners, links to their receivers' owners (the dead
+ * ones dropped), and every ghost subscribes afresh at its owner. A collective. */
 hr_status hr_link_migrate(hr_solver *s, hr_err *err) {
+  int32_t *old = malloc((size_t)(s->nel > 0 ? s->nel : 1) * sizeof *old);
+  hr_status st = hr_dist_agree(s, old ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory"),
+                               err);
+  if (st != HR_OK) {
+    free(old);
+    return st;
+  }
+  memcpy(old, s->eown, (size_t)s->nel * sizeof *old);
+  for (int64_t e = 0; e < s->nel; e++) s->eown[e] = hr_owner_of(s, s->el[e].gid);
+  st = move_elements(s, old, err);
+  free(old);
+  if (st != HR_OK) return st;
   int64_t n = 0;
   for (int64_t i = 0; i < s->nlinks; i++)
     if (s->links[i].Fu >= 0) s->links[n++] = s->links[i];
   hr_link *cur = s->links;
   s->links = NULL;
-  hr_status st = route_links(s, &cur, &n, HR_OK, err);
+  st = route_links(s, &cur, &n, HR_OK, err);
   s->links = cur;
   s->nlinks = s->cap_links = n;
   s->ndead = s->nsorted = 0;
   s->sorted = 0;
-  return st;
+  if (st != HR_OK) return st;
+  s->nsubs = 0;
+  memset(s->esub, 0, (size_t)s->nel);
+  return hr_link_subscribe(s, err);
 }
 
-/* Subdivides the elements marked in mark[0, n) in increasing idx, so that element indices do not
- * depend on the order of links; in a distributed run, the union of every rank's marks, so that
- * every rank holds the same elements at the same indices. Then estimates the new elements' open
- * fractions. A collective in distributed runs; every rank returns the same status. */
+/* A request to split element 'gid' (to its owner), and a new element for its owner with the
+ * state it starts from (its parent's). */
+typedef struct msg_split {
+  uint64_t gid;
+} msg_split;
+
+typedef struct msg_create {
+  uint64_t gid;
+  double B[3], Bs[3], bref, open;
+} msg_create;
+
+/* Subdivides the elements marked in mark[0, n), here in increasing idx; asks the owners of
+ * marked ghosts to split them too; the owners of split elements send each new child that
+ * another rank owns to that rank. Then the new own elements' open fractions. A collective;
+ * every rank returns the same status. */
 static hr_status split_marked(hr_solver *s, const uint8_t *mark, int64_t n, hr_err *err) {
-  int64_t nm = 0;
-  for (int64_t e = 0; e < n; e++) nm += mark[e];
-  int32_t *mine = malloc((size_t)(nm > 0 ? nm : 1) * sizeof *mine), *all = NULL;
-  hr_status st = mine ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
-  if ((st = hr_dist_agree(s, st, err)) != HR_OK) {
-    free(mine);
-    return st;
-  }
-  for (int64_t e = 0, k = 0; e < n; e++)
-    if (mark[e]) mine[k++] = (int32_t)e;
-  int64_t nall = nm;
-  if (s->dist) {
-    st = hr_dist_union_i32(s->dist, mine, nm, &all, &nall);
-    free(mine);
-    if (st != HR_OK) return hr_err_set(err, st, "out of memory during refinement");
-  } else {
-    all = mine;
-  }
   const int64_t nel0 = s->nel;
-  for (int64_t k = 0; k < nall && st == HR_OK; k++) st = hr_elem_subdivide(s, all[k]);
-  free(all);
+  hr_status st = HR_OK;
+  int64_t nreq = 0;
+  for (int64_t e = 0; e < n && st == HR_OK; e++) {
+    if (!mark[e]) continue;
+    st = hr_elem_subdivide(s, (int32_t)e);
+    nreq += !hr_owns(s, e);
+  }
+  if (s->dist) {
+    msg_split *rq = malloc((size_t)(nreq > 0 ? nreq : 1) * sizeof *rq);
+    int32_t *dest = malloc((size_t)(nreq > 0 ? nreq : 1) * sizeof *dest);
+    if (!rq || !dest) st = HR_ERR_NOMEM;
+    int64_t k = 0;
+    for (int64_t e = 0; e < n && st == HR_OK; e++)
+      if (mark[e] && !hr_owns(s, e)) rq[k].gid = s->el[e].gid, dest[k++] = s->eown[e];
+    char *in = NULL;
+    int64_t nin = 0;
+    st = exchange(s, (const char *)rq, dest, st == HR_OK ? k : 0, sizeof *rq, &in, &nin, st, err);
+    free(rq), free(dest);
+    for (int64_t i = 0; i < nin && st == HR_OK; i++) {
+      msg_split m;
+      memcpy(&m, in + i * (int64_t)sizeof m, sizeof m);
+      const int32_t e = hr_elem_find(s, m.gid);
+      st = e >= 0 && hr_owns(s, e) ? hr_elem_subdivide(s, e) : HR_ERR_INVALID;
+    }
+    free(in);
+    /* new children of own elements that other ranks own */
+    int64_t nc = 0;
+    for (int64_t e = nel0; e < s->nel; e++)
+      nc += !hr_owns(s, e) && hr_owns(s, s->el[e].parent);
+    msg_create *cr = malloc((size_t)(nc > 0 ? nc : 1) * sizeof *cr);
+    int32_t *cd = malloc((size_t)(nc > 0 ? nc : 1) * sizeof *cd);
+    if (!cr || !cd) st = st == HR_OK ? HR_ERR_NOMEM : st;
+    k = 0;
+    for (int64_t e = nel0; e < s->nel && st == HR_OK; e++) {
+      const int32_t par = s->el[e].parent;
+      if (hr_owns(s, e) || !hr_owns(s, par)) continue;
+      msg_create *m = &cr[k];
+      memset(m, 0, sizeof *m);
+      m->gid = s->el[e].gid;
+      memcpy(m->B, s->B[par], sizeof m->B);
+      memcpy(m->Bs, s->Bs[par], sizeof m->Bs);
+      m->bref = s->bref[par], m->open = s->open[par];
+      cd[k++] = s->eown[e];
+    }
+    st = exchange(s, (const char *)cr, cd, st == HR_OK ? k : 0, sizeof *cr, &in, &nin, st, err);
+    free(cr), free(cd);
+    for (int64_t i = 0; i < nin && st == HR_OK; i++) {
+      msg_create m;
+      memcpy(&m, in + i * (int64_t)sizeof m, sizeof m);
+      const int32_t e = hr_elem_ensure(s, m.gid);
+      if (e < 0) {
+        st = HR_ERR_NOMEM;
+        break;
+      }
+      memcpy(s->B[e], m.B, sizeof m.B);
+      memcpy(s->Bs[e], m.Bs, sizeof m.Bs);
+      s->bref[e] = m.bref, s->bvar[e] = 0, s->open[e] = m.open;
+      s->open[s->el[e].parent] = m.open;
+    }
+    free(in);
+    /* the subscribers of what was split here learn of the children */
+    uint8_t *split = calloc((size_t)s->nel + 1, 1);
+    if (!split && st == HR_OK) st = HR_ERR_NOMEM;
+    for (int64_t e = 0; split && e < nel0; e++)
+      split[e] = hr_owns(s, e) && s->el[e].child >= nel0;
+    if ((st = hr_dist_agree(s, st == HR_OK ? st : hr_err_set(err, st, "out of memory"), err)) ==
+        HR_OK)
+      st = notify_splits(s, split, err);
+    free(split);
+  }
   if (st == HR_OK) hr_elem_open(s, nel0, s->nel);
   if (st != HR_OK) st = hr_err_set(err, st, "refinement exceeds a limit or is out of memory");
   return hr_dist_agree(s, st, err);
@@ -783,6 +1129,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     }
     free(coff);
     if (s->dist) st = route_links(s, &cur, &ncur, st, err);
+    if (s->dist && st == HR_OK) st = subscribe_range(s, cur, ncur, err);
   }
   free(cur);
   cur = NULL;

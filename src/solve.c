@@ -141,13 +141,16 @@ void hr_solver_destroy(hr_solver **ps) {
   free(s->ls);
   free(s->lfo);
   free(s->eown);
+  free(s->esub);
+  free(s->gkey);
+  free(s->gval);
+  free(s->subs);
+  free(s->rootown);
+  free(s->omap);
+  free(s->coll);
   free(s);
   *ps = NULL;
 }
-
-/* The oracle's reference radiosity (bref, set by push-pull) is at least this fraction of the
- * radiosity unit, so that elements in the dark are not refined for light nobody sees. */
-#define BREF_FLOOR 0.1
 
 /* Largest channel of an RGB value. */
 static inline double max3(const double *v) {
@@ -203,113 +206,25 @@ static void gather(hr_solver *s) {
   }
 }
 
-/* Push 'down' (gathered at ancestors: RGB, Gu, Gf) to the leaves, pull area-weighted B back
- * up. Writes the new B of 'idx' into 'bout', the smallest and largest radiosity of its leaves
- * (largest channel) into range[0..1] and their difference into s->bvar, and returns the largest
- * change of B over the leaves below. Reads the previous B of an element before overwriting it. */
-static double pushpull(hr_solver *s, int32_t idx, const double down[5], double bout[3],
-                       double range[2]) {
-  const hr_elem *e = &s->el[idx];
-  const hr_material *m = &s->scene->mats[s->scene->surfs[e->surf].material];
-  double g[5] = {down[0] + s->G[idx][0], down[1] + s->G[idx][1], down[2] + s->G[idx][2],
-                 down[3] + s->Gu[idx], down[4] + s->Gf[idx]};
-  const double floor = BREF_FLOOR * s->unit, br = s->rho_max[idx] * g[3];
-  s->bref[idx] = br > floor ? br : floor;
-  double change = 0, b[3];
-  if (e->child < 0) {
-    for (int c = 0; c < 3; c++) {
-      b[c] = m->emit[c] + m->rho[c] * g[c];
-      double d = fabs(b[c] - s->B[idx][c]);
-      change = d > change ? d : change;
-    }
-    range[0] = range[1] = max3(b);
-  } else {
-    double acc[3] = {0, 0, 0}, area = 0;
-    range[0] = INFINITY;
-    range[1] = -INFINITY;
-    for (int k = 0; k < 4; k++) {
-      double bc[3], rc[2];
-      int32_t ci = e->child + k;
-      double d = pushpull(s, ci, g, bc, rc);
-      change = d > change ? d : change;
-      double a = s->el[ci].area;
-      area += a;
-      for (int c = 0; c < 3; c++) acc[c] += a * bc[c];
-      range[0] = rc[0] < range[0] ? rc[0] : range[0];
-      range[1] = rc[1] > range[1] ? rc[1] : range[1];
-    }
-    for (int c = 0; c < 3; c++) b[c] = acc[c] / area;
-  }
-  /* What the element sends (solver_impl.h, Bs): its reflected light over its open part. The open
-   * fraction from rays is trusted only as far as the element's own links agree: the sum of their
-   * form factors (g[4]) is what its hemisphere sees, which in a closed scene is its open part.
-   * Where the ray test calls a part covered that still sees the scene, the links win; otherwise
-   * such an element would send more light than it receives (measured: the house regr01 of
-   * assimp's test models diverged). */
-  double op = g[4] < 1 ? g[4] : 1;
-  op = s->open[idx] > op ? s->open[idx] : op;
-  const double inv = s->open[idx] > 0 ? 1.0 / op : 1.0; /* wholly closed: about 0 anyway */
-  for (int c = 0; c < 3; c++) {
-    s->B[idx][c] = bout[c] = b[c];
-    s->Bs[idx][c] = m->emit[c] + (b[c] - m->emit[c]) * inv;
-  }
-  s->bvar[idx] = range[1] - range[0];
-  return change;
+static int64_t count_leaves(const hr_solver *s) {
+  int64_t n = 0;
+  for (int64_t e = 0; e < s->nel; e++) n += s->el[e].child < 0 && hr_owns(s, e);
+  return n;
 }
 
-static double push_pull_all(hr_solver *s) {
-  double maxc = 0;
-  int n = s->scene->nsurfs;
-#pragma omp parallel for schedule(dynamic, 8) reduction(max : maxc) if (s->nel > PAR_MIN)
-  for (int i = 0; i < n; i++) {
-    double zero[5] = {0, 0, 0, 0, 0}, b[3], range[2];
-    double d = pushpull(s, i, zero, b, range);
-    maxc = d > maxc ? d : maxc;
-  }
-  return maxc;
+static int64_t count_own(const hr_solver *s) {
+  if (!s->dist) return s->nel;
+  int64_t n = 0;
+  for (int64_t e = 0; e < s->nel; e++) n += hr_owns(s, e);
+  return n;
 }
 
-/* Distributed runs: every rank needs every element's gathered light for push-pull, which each
- * rank then runs over every surface tree (push-pull is O(elements), the links are the work): so
- * a tree spread over ranks needs no push or pull messages, and every rank ends with the same B,
- * Bs, bref and bvar, which refinement and gathering read at the sources. An element's links all
- * live at its owner, so the other ranks hold exact zeros for it and the sum is exact. */
-#define SYNC_W 5
-static hr_status sync_gathered(hr_solver *s, hr_err *err) {
-  if (!s->dist) return HR_OK;
-  double *buf = malloc((size_t)(s->nel * SYNC_W + 1) * sizeof *buf);
-  hr_status st = buf ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory");
-  if (hr_test_fail(s, HR_PHASE_PUSHPULL))
-    st = hr_err_set(err, HR_ERR_NOMEM, "out of memory (injected by HRAD_TEST_FAIL)");
-  st = hr_dist_agree(s, st, err);
-  if (st != HR_OK) {
-    free(buf);
-    return st;
-  }
-#pragma omp parallel for schedule(static) if (s->nel > PAR_MIN)
-  for (int64_t e = 0; e < s->nel; e++) {
-    double *b = buf + e * SYNC_W;
-    memcpy(b, s->G[e], 3 * sizeof *b);
-    b[3] = s->Gu[e];
-    b[4] = s->Gf[e];
-  }
-  hr_dist_sum_f64(s->dist, buf, s->nel * SYNC_W);
-#pragma omp parallel for schedule(static) if (s->nel > PAR_MIN)
-  for (int64_t e = 0; e < s->nel; e++) {
-    const double *b = buf + e * SYNC_W;
-    memcpy(s->G[e], b, 3 * sizeof *b);
-    s->Gu[e] = b[3];
-    s->Gf[e] = b[4];
-  }
-  free(buf);
-  return HR_OK;
-}
-
-/* The counts reported (links, rays) over all ranks. */
+/* The counts reported (links, rays, leaves, elements) over all ranks. */
 void hr_solver_sync_counts(hr_solver *s) {
-  int64_t v[3] = {s->nlinks - s->ndead, s->rays, s->initial_links};
-  hr_dist_sum_i64(s->dist, v, 3);
-  s->g_links = v[0], s->g_rays = v[1], s->g_initial = v[2];
+  int64_t v[5] = {s->nlinks - s->ndead, s->rays, s->initial_links, count_leaves(s),
+                  count_own(s)};
+  hr_dist_sum_i64(s->dist, v, 5);
+  s->g_links = v[0], s->g_rays = v[1], s->g_initial = v[2], s->g_leaves = v[3], s->g_nel = v[4];
 }
 
 hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err) {
@@ -321,14 +236,9 @@ hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err) {
   return st;
 }
 
-int32_t hr_elem_owner(const hr_solver *s, int64_t e, int64_t parent) {
-  if (!s->dist) return 0;
-  if (!s->scatter) return s->eown[parent];
-  /* splitmix64 of (seed, gid) */
-  uint64_t z = s->scatter ^ (s->el[e].gid * UINT64_C(0x9e3779b97f4a7c15));
-  z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
-  z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
-  return (int32_t)((z ^ (z >> 31)) % (uint64_t)s->nranks);
+/* Every local element's owner from the owner function (after it changed). */
+static void recompute_owners(hr_solver *s) {
+  for (int64_t e = 0; e < s->nel; e++) s->eown[e] = hr_owner_of(s, s->el[e].gid);
 }
 
 hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uint64_t scatter,
@@ -336,34 +246,30 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uin
   if (s->started) return hr_err_set(err, HR_ERR_INVALID, "hr_solver_set_dist: solver has run");
   const int P = hr_dist_size(d), n = s->scene->nsurfs;
   if (!d || P == 1) return HR_OK; /* one process: nothing to spread */
-  s->dist = d;
-  s->rank = hr_dist_rank(d);
-  s->nranks = P;
-  s->scatter = scatter;
-  if (scatter) {
-    for (int i = 0; i < n; i++) s->eown[i] = hr_elem_owner(s, i, i);
-  } else if (owner) {
-    for (int i = 0; i < n; i++) {
-      if (owner[i] < 0 || owner[i] >= P) {
-        s->dist = NULL;
+  if (owner)
+    for (int i = 0; i < n; i++)
+      if (owner[i] < 0 || owner[i] >= P)
         return hr_err_set(err, HR_ERR_INVALID, "surface %d: owner %d is not a rank (0..%d)", i,
                           owner[i], P - 1);
-      }
-      s->eown[i] = owner[i];
-    }
+  s->rootown = malloc((size_t)n * sizeof *s->rootown);
+  if (!s->rootown) return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  s->rank = hr_dist_rank(d);
+  s->nranks = P;
+  s->own_seed = scatter;
+  if (owner) {
+    memcpy(s->rootown, owner, (size_t)n * sizeof *owner);
   } else {
     /* by area, largest first (ties by index), each to the rank with the least so far: the
      * work of a surface's tree grows with its area over A_e */
     double *area = malloc((size_t)n * sizeof *area);
     int ok = area != NULL;
     for (int i = 0; ok && i < n; i++) area[i] = s->scene->surfs[i].area;
-    ok = ok && hr_partition_greedy(area, n, P, s->eown);
+    ok = ok && hr_partition_greedy(area, n, P, s->rootown);
     free(area);
-    if (!ok) {
-      s->dist = NULL;
-      return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
-    }
+    if (!ok) return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
   }
+  s->dist = d;
+  recompute_owners(s);
   const char *tm = getenv("HRAD_TEST_MIGRATE");
   if (tm) s->migrate_seed = strtoull(tm, NULL, 10);
   const char *tf = getenv("HRAD_TEST_FAIL");
@@ -392,7 +298,7 @@ static hr_status check_physical(const hr_solver *s, hr_err *err) {
     }
   const double bound = rmax < 1 ? BOUND_SLACK * emax / (1 - rmax) : INFINITY;
   for (int64_t e = 0; e < s->nel; e++) {
-    if (s->el[e].child >= 0) continue;
+    if (s->el[e].child >= 0 || !hr_owns(s, e)) continue;
     for (int c = 0; c < 3; c++) {
       const double b = s->B[e][c];
       if (isfinite(b) && b <= bound && b >= 0) continue;
@@ -461,11 +367,6 @@ static double mpi_secs(const hr_solver *s) {
   return t;
 }
 
-static int64_t count_leaves(const hr_solver *s) {
-  int64_t n = 0;
-  for (int64_t e = 0; e < s->nel; e++) n += s->el[e].child < 0;
-  return n;
-}
 
 /* Builds what the iterations need that a checkpoint does not hold: the ray caster, the shaft
  * hierarchy and the open fractions of the surfaces. */
@@ -493,12 +394,11 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
   hr_dist_sum_i64(s->dist, nnew, 1);
   double tb = hr_now(), mb = mpi_secs(s);
   gather(s);
-  if ((st = sync_gathered(s, err)) != HR_OK) return st;
-  double tc = hr_now(), mc = mpi_secs(s);
-  double abs = push_pull_all(s);
+  double tc = hr_now(), mc = mpi_secs(s), abs = 0;
+  if ((st = hr_push_pull(s, &abs, err)) != HR_OK) return st;
   hr_solver_sync_counts(s);
   *change = abs / s->unit;
-  if ((st = check_physical(s, err)) != HR_OK) return st;
+  if ((st = hr_dist_agree(s, check_physical(s, err), err)) != HR_OK) return st;
   if ((st = check_contracting(s, abs, *nnew, err)) != HR_OK) return st;
   update_unit(s);
   double td = hr_now();
@@ -563,6 +463,7 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     const double t0 = hr_now(), m0 = mpi_secs(s);
     hr_elem_open(s, 0, s->nel);
     if ((st = hr_link_init(s, err)) != HR_OK) return st;
+    if ((st = hr_link_subscribe(s, err)) != HR_OK) return st;
     hr_solver_sync_counts(s);
     s->t.init_graph = hr_now() - t0;
     s->mpi_t[0] = mpi_secs(s) - m0;
@@ -581,7 +482,8 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     /* Display ({15}) and checkpoints: the state is complete here, and s->bf_e is already the
      * next iteration's. */
     if (cb) {
-      hr_iter_info info = {s->iterations, bf_e, count_leaves(s), s->g_links, change, s->t.total};
+      hr_iter_info info = {s->iterations, bf_e, s->dist ? s->g_leaves : count_leaves(s),
+                           s->dist ? s->g_links : s->nlinks - s->ndead, change, s->t.total};
       int64_t stop = cb(ud, s, &info) != 0;
       hr_dist_max_i64(s->dist, &stop, 1); /* every rank stops after the same iteration */
       if (stop && !s->done) {
@@ -598,8 +500,8 @@ void hr_solver_stats(const hr_solver *s, hr_stats *st) {
   memset(st, 0, sizeof *st);
   st->nsurfaces = s->scene->nsurfs;
   st->npolys = s->scene->npolys;
-  st->elements = count_leaves(s);
-  st->elements_all = s->nel;
+  st->elements = s->dist ? s->g_leaves : count_leaves(s);
+  st->elements_all = s->dist ? s->g_nel : s->nel;
   st->links = s->dist ? s->g_links : s->nlinks - s->ndead;
   st->initial_links = s->dist ? s->g_initial : s->initial_links;
   st->iterations = s->iterations;
@@ -611,36 +513,44 @@ void hr_solver_stats(const hr_solver *s, hr_stats *st) {
   st->time_s = s->t;
 }
 
-int64_t hr_solver_elements(const hr_solver *s) { return s->nel; }
+static int cmp_omap(const void *a, const void *b) {
+  const uint64_t *x = a, *y = b;
+  return x[0] < y[0] ? -1 : x[0] > y[0];
+}
 
-hr_status hr_solver_migrate(hr_solver *s, const int32_t *owner, hr_err *err) {
+hr_status hr_solver_migrate(hr_solver *s, const uint64_t *gids, const int32_t *ranks, int64_t n,
+                            hr_err *err) {
   if (!s->dist) return hr_err_set(err, HR_ERR_INVALID, "hr_solver_migrate: not distributed");
-  int bad = 0;
-  for (int64_t e = 0; e < s->nel; e++) bad |= owner[e] < 0 || owner[e] >= s->nranks;
+  int bad = n < 0;
+  for (int64_t i = 0; i < n && !bad; i++) {
+    const uint64_t surf = gids[i] >> HR_GID_PATH_BITS;
+    bad = ranks[i] < 0 || ranks[i] >= s->nranks || surf >= (uint64_t)s->scene->nsurfs ||
+          (gids[i] & ((UINT64_C(1) << HR_GID_PATH_BITS) - 1)) == 0;
+  }
   if (hr_dist_any(s->dist, bad))
-    return hr_err_set(err, HR_ERR_INVALID, "hr_solver_migrate: an owner is not a rank");
-  memcpy(s->eown, owner, (size_t)s->nel * sizeof *owner);
+    return hr_err_set(err, HR_ERR_INVALID, "hr_solver_migrate: a bad element id or rank");
+  uint64_t(*m)[2] = malloc((size_t)(n > 0 ? n : 1) * sizeof *m);
+  hr_status st = hr_dist_agree(s, m ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory"),
+                               err);
+  if (st != HR_OK) {
+    free(m);
+    return st;
+  }
+  for (int64_t i = 0; i < n; i++) m[i][0] = gids[i], m[i][1] = (uint64_t)ranks[i];
+  qsort(m, (size_t)n, sizeof *m, cmp_omap);
+  free(s->omap);
+  s->omap = m;
+  s->nomap = n;
+  s->own_seed = 0;
   return hr_link_migrate(s, err);
 }
 
 /* The test hook HRAD_TEST_MIGRATE=SEED: after every iteration, every element to a rank drawn
  * from (SEED, the iteration, its gid). */
 static hr_status test_migrate(hr_solver *s, hr_err *err) {
-  int32_t *own = malloc((size_t)s->nel * sizeof *own);
-  hr_status st = hr_dist_agree(s, own ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory"),
-                               err);
-  if (st == HR_OK) {
-    for (int64_t e = 0; e < s->nel; e++) {
-      uint64_t z = (s->migrate_seed + (uint64_t)s->iterations * UINT64_C(0x632be59bd9b4e019)) ^
-                   (s->el[e].gid * UINT64_C(0x9e3779b97f4a7c15));
-      z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
-      z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
-      own[e] = (int32_t)((z ^ (z >> 31)) % (uint64_t)s->nranks);
-    }
-    st = hr_solver_migrate(s, own, err);
-  }
-  free(own);
-  return st;
+  uint64_t z = s->migrate_seed + (uint64_t)s->iterations * UINT64_C(0x632be59bd9b4e019);
+  s->own_seed = z ? z : 1;
+  return hr_link_migrate(s, err);
 }
 
 hr_status hr_solver_rank_stats(const hr_solver *s, hr_rank_stats *all, hr_err *err) {
@@ -649,7 +559,17 @@ hr_status hr_solver_rank_stats(const hr_solver *s, hr_rank_stats *all, hr_err *e
   me.rank = s->rank;
   for (int i = 0; i < s->scene->nsurfs; i++) me.surfaces += hr_owns(s, i);
   me.links = s->nlinks - s->ndead;
-  for (int64_t e = 0; e < s->nel; e++) me.leaves += s->el[e].child < 0 && hr_owns(s, e);
+  me.leaves = count_leaves(s);
+  me.elements = count_own(s);
+  me.ghosts = s->nel - me.elements;
+  /* what the elements and links take: their records, the per-element arrays, the candidate
+   * pool and the link index (capacities, as allocated) */
+  const double per_el = sizeof(hr_elem) + 15 * sizeof(double) + 2 * sizeof(int32_t) + 1 +
+                        2 * (sizeof(uint64_t) + sizeof(int32_t));
+  me.elem_mb = (double)s->cap_el * per_el / 1e6;
+  me.link_mb = ((double)s->cap_links * sizeof(hr_link) + (double)s->cap_pool * 4 +
+                (double)s->nrstart * 16 + (double)s->nsorted * 8) / 1e6;
+  hr_dist_msg_counters(s->dist, &me.msgs, &me.msg_bytes);
   me.rays = s->rays;
   hr_dist_counters(s->dist, &me.mpi_calls, &me.mpi_bytes, &me.mpi_s);
   me.busy_s = s->t.total - me.mpi_s;
@@ -674,16 +594,30 @@ void hr_solver_poly_radiosity(const hr_solver *s, int poly, double rgb[3]) {
   for (int c = 0; c < 3; c++) rgb[c] = area > 0 ? acc[c] / area : 0;
 }
 
-hr_status hr_solver_leaves(const hr_solver *s, hr_leaf **leaves, int64_t *nleaves) {
-  int64_t n = count_leaves(s);
-  hr_leaf *L = malloc((size_t)(n > 0 ? n : 1) * sizeof *L);
-  if (!L) return HR_ERR_NOMEM;
+/* A leaf with its gid, for the canonical order. */
+typedef struct gid_leaf {
+  uint64_t gid;
+  hr_leaf l;
+} gid_leaf;
+
+static int cmp_gid_leaf(const void *a, const void *b) {
+  const gid_leaf *x = a, *y = b;
+  return x->gid < y->gid ? -1 : x->gid > y->gid;
+}
+
+/* This rank's own leaves with their gids, in gid order: '*out' (malloc'd), '*n'. */
+static int own_leaves(const hr_solver *s, gid_leaf **out, int64_t *n) {
+  *n = count_leaves(s);
+  gid_leaf *L = malloc((size_t)(*n > 0 ? *n : 1) * sizeof *L);
+  if (!L) return 0;
   int64_t k = 0;
   for (int64_t e = 0; e < s->nel; e++) {
     const hr_elem *el = &s->el[e];
-    if (el->child >= 0) continue;
-    hr_leaf *l = &L[k++];
-    memset(l, 0, sizeof *l);
+    if (el->child >= 0 || !hr_owns(s, e)) continue;
+    gid_leaf *g = &L[k++];
+    memset(g, 0, sizeof *g);
+    g->gid = el->gid;
+    hr_leaf *l = &g->l;
     l->surf = el->surf;
     l->nverts = s->scene->surfs[el->surf].nverts;
     memcpy(l->lat, el->lat, sizeof l->lat);
@@ -691,6 +625,65 @@ hr_status hr_solver_leaves(const hr_solver *s, hr_leaf **leaves, int64_t *nleave
     l->area = el->area;
     for (int c = 0; c < 3; c++) l->B[c] = s->B[e][c];
   }
+  qsort(L, (size_t)*n, sizeof *L, cmp_gid_leaf);
+  *out = L;
+  return 1;
+}
+
+hr_status hr_solver_collect(hr_solver *s, hr_err *err) {
+  if (!s->dist) return HR_OK;
+  gid_leaf *L = NULL;
+  int64_t n = 0;
+  int64_t *sb = calloc((size_t)s->nranks, sizeof *sb);
+  hr_status st = sb && own_leaves(s, &L, &n) ? HR_OK : HR_ERR_NOMEM;
+  if ((st = hr_dist_agree(s, st ? hr_err_set(err, st, "out of memory") : st, err)) != HR_OK) {
+    free(sb), free(L);
+    return st;
+  }
+  sb[0] = n * (int64_t)sizeof *L;
+  void *all = NULL;
+  int64_t tot = 0;
+  st = hr_dist_alltoall(s->dist, L, sb, &all, &tot);
+  free(sb), free(L);
+  if (st != HR_OK) return hr_err_set(err, st, "out of memory collecting the leaves");
+  free(s->coll);
+  s->coll = NULL;
+  s->ncoll = 0;
+  if (s->rank != 0) {
+    free(all);
+    return HR_OK;
+  }
+  gid_leaf *g = all;
+  const int64_t m = tot / (int64_t)sizeof *g;
+  qsort(g, (size_t)m, sizeof *g, cmp_gid_leaf);
+  s->coll = malloc((size_t)(m > 0 ? m : 1) * sizeof *s->coll);
+  if (s->coll)
+    for (int64_t i = 0; i < m; i++) s->coll[i] = g[i].l;
+  free(all);
+  if (!s->coll) return hr_err_set(err, HR_ERR_NOMEM, "out of memory collecting the leaves");
+  s->ncoll = m;
+  return HR_OK;
+}
+
+/* Leaves in gid order (the same on any number of ranks): this process's own, or on rank 0 of a
+ * distributed run what hr_solver_collect brought. */
+hr_status hr_solver_leaves(const hr_solver *s, hr_leaf **leaves, int64_t *nleaves) {
+  if (s->dist && s->coll) {
+    hr_leaf *L = malloc((size_t)(s->ncoll > 0 ? s->ncoll : 1) * sizeof *L);
+    if (!L) return HR_ERR_NOMEM;
+    memcpy(L, s->coll, (size_t)s->ncoll * sizeof *L);
+    *leaves = L;
+    *nleaves = s->ncoll;
+    return HR_OK;
+  }
+  gid_leaf *g;
+  int64_t n;
+  if (!own_leaves(s, &g, &n)) return HR_ERR_NOMEM;
+  hr_leaf *L = malloc((size_t)(n > 0 ? n : 1) * sizeof *L);
+  if (L)
+    for (int64_t i = 0; i < n; i++) L[i] = g[i].l;
+  free(g);
+  if (!L) return HR_ERR_NOMEM;
   *leaves = L;
   *nleaves = n;
   return HR_OK;

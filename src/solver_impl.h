@@ -113,15 +113,34 @@ struct hr_solver {
   int iterations, converged, threads;
   hr_timing t;
   double t_start;
-  /* Distribution (docs/design.md, "Distribution"): NULL in one process. A rank holds every
-   * element (the same arrays, in the same order, on every rank) but only the links whose
-   * receiver lies in a surface it owns; after push-pull the owners' radiosities are shared. */
+  /* Distribution (docs/design.md, "Distribution"): NULL in one process. A rank holds the
+   * elements it owns, every root, and ghosts: copies of other ranks' elements that it needs (the
+   * sources of its links, the parents and children of its own elements, and their ancestors and
+   * siblings, since the local tree is closed under parent and sibling). Elements are found by gid
+   * (gmap); local indices differ between ranks and nothing depends on them. */
   hr_dist *dist;
   int32_t *eown;      /* per element: the rank that owns it and the links it receives */
-  uint64_t scatter;   /* non-zero: every new element goes to a rank drawn from (scatter, gid) */
+  uint8_t *esub;      /* per ghost: 1 once this rank subscribed to its owner's stores */
+  uint64_t *gkey;     /* gid -> idx map (open addressing, gkey 0 = empty) */
+  int32_t *gval;
+  int64_t gcap;       /* slots (a power of 2), at least 2 cap_el */
+  int32_t (*subs)[2]; /* at the owner: (element idx, rank) pairs, ranks that hold a subscribed
+                         ghost of its element and get its stores after every push-pull */
+  int64_t nsubs, cap_subs;
+  /* The owner function (hr_owner_of), the same on every rank: a rank drawn from (own_seed, gid)
+   * when own_seed != 0, else the rank of the deepest ancestor listed in omap (sorted gid, rank
+   * pairs; hr_solver_migrate), else rootown[surface]. */
+  uint64_t own_seed;
+  int32_t *rootown;
+  uint64_t (*omap)[2];
+  int64_t nomap;
   int rank, nranks;
-  int64_t g_links, g_rays, g_initial; /* over all ranks (= the local counts in one process) */
+  int64_t g_links, g_rays, g_initial, g_leaves, g_nel; /* over all ranks */
   double mpi_t[4];    /* seconds inside MPI per phase: init graph, refine, gather, push-pull */
+  int64_t msgs, msg_bytes; /* point-to-point messages (batches) and bytes this rank sent */
+  /* distributed runs: every leaf (gid order) gathered on rank 0 by hr_solver_collect */
+  hr_leaf *coll;
+  int64_t ncoll;
   uint64_t migrate_seed; /* test hook HRAD_TEST_MIGRATE=SEED: new random owners every iteration */
   /* Test hook (HRAD_TEST_FAIL=RANK:PHASE:ITER, read by hr_solver_set_dist): rank 'fail_rank'
    * fails with "out of memory" in phase fail_phase (HR_PHASE_*) of iteration fail_iter. */
@@ -139,9 +158,8 @@ static inline int hr_test_fail(const hr_solver *s, int phase) {
 static inline int hr_owns(const hr_solver *s, int64_t e) {
   return !s->dist || s->eown[e] == s->rank;
 }
-/* The owner of a new element 'e' (idx) below 'parent': its parent's, or with s->scatter a rank
- * drawn from the seed and its gid (tests: any assignment gives the same answer). */
-int32_t hr_elem_owner(const hr_solver *s, int64_t e, int64_t parent);
+/* The rank that owns the element with global id 'gid' (0 in one process). */
+int32_t hr_owner_of(const hr_solver *s, uint64_t gid);
 /* Makes every rank see a failure of any: returns 'st' where this rank failed, HR_ERR_REMOTE
  * (with a message) where another did, HR_OK where none did. A collective in distributed runs. */
 hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err);
@@ -151,6 +169,12 @@ void hr_solver_sync_counts(hr_solver *s);
 /* elem.c */
 hr_status hr_elem_init(hr_solver *s);                  /* one root per surface, idx == surface */
 hr_status hr_elem_subdivide(hr_solver *s, int32_t idx); /* creates 4 children if a leaf */
+/* The local index of element 'gid', or -1 when this rank does not hold it. */
+int32_t hr_elem_find(const hr_solver *s, uint64_t gid);
+/* The local index of element 'gid', creating it (and the missing ancestors and their siblings,
+ * by subdivision: values copied from the parents) if needed; -1 for a gid that cannot be an
+ * element of this scene, -2 when out of memory or past a limit. */
+int32_t hr_elem_ensure(hr_solver *s, uint64_t gid);
 /* Estimates the open fraction (hr_vf_open) of elements [lo, hi), in parallel; needs s->vis. */
 void hr_elem_open(hr_solver *s, int64_t lo, int64_t hi);
 
@@ -170,7 +194,14 @@ hr_status hr_link_init(hr_solver *s, hr_err *err);          /* paper 2.2.1 */
 /* One refinement pass at threshold 'bf_e' (relative); returns new link count through 'nnew'. */
 hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err); /* 2.2.2 */
 hr_status hr_link_sort(hr_solver *s); /* groups links by receiver (rstart, xstart/xidx) */
-hr_status hr_link_migrate(hr_solver *s, hr_err *err); /* links to their receivers' owners */
+/* Distributed runs (collectives): elements and links to their owners after the owner function
+ * changed; and subscriptions of this rank's ghost sources at their owners. */
+hr_status hr_link_migrate(hr_solver *s, hr_err *err);
+hr_status hr_link_subscribe(hr_solver *s, hr_err *err);
+
+/* pushpull.c: push-pull of every tree ({14}); the largest change of B over the leaves in
+ * '*maxc'. A collective in distributed runs (every rank gets the same status and maxc). */
+hr_status hr_push_pull(hr_solver *s, double *maxc, hr_err *err);
 
 /* solve.c */
 double hr_now(void);

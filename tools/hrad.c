@@ -79,6 +79,7 @@ typedef struct cli {
   const char *outdir; /* -o as given */
   int quiet;
   int snapshots;
+  int snap_collect; /* distributed run with snapshots: collect the leaves each iteration */
   int hdr;
   int have_camera;
   hr_camera camera;
@@ -1478,6 +1479,10 @@ static int on_iter(void *ud, const hr_solver *s, const hr_iter_info *it) {
   if (c->ckpt &&
       hr_dist_any(g_dist, g_rank == 0 && now_s() - c->ckpt_last >= c->ckpt_every))
     save_ckpt(c, s, it->iter);
+  if (c->snap_collect) { /* distributed: every rank sends its leaves to rank 0 first */
+    hr_err cerr = {{0}};
+    if (hr_solver_collect((hr_solver *)s, &cerr) != HR_OK) fail("%s", cerr.msg);
+  }
   if (c->snapshots) snapshot(c, s, it->iter);
   return hr_dist_any(g_dist, atomic_load(&g_stop) != 0);
 }
@@ -1561,6 +1566,7 @@ int main(int argc, char **argv) {
     g_rank = hr_dist_rank(g_dist);
   }
   parse_args(&c, argc, argv);
+  c.snap_collect = c.snapshots && hr_dist_size(g_dist) > 1;
   if (g_rank != 0) c.quiet = 1, c.snapshots = 0; /* rank 0 prints and writes */
   start_signals();
   if (g_rank == 0) {
@@ -1632,6 +1638,7 @@ int main(int argc, char **argv) {
   c.ckpt_last = now_s();
   st = hr_solver_run(s, on_iter, &c, &err);
   const int nranks = hr_dist_size(g_dist);
+  if (nranks > 1 && st == HR_OK) st = hr_solver_collect(s, &err); /* the leaves to rank 0 */
   hr_rank_stats *ranks = NULL;
   if (nranks > 1 && st == HR_OK) { /* every rank's share, to rank 0 */
     if (g_rank == 0) ranks = xrealloc(NULL, (size_t)nranks * sizeof *ranks);

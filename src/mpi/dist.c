@@ -21,6 +21,7 @@ struct hr_dist {
    * its whole vector), seconds inside them, waiting for the slowest rank included */
   int64_t calls, bytes;
   double secs;
+  int64_t msgs, msg_bytes; /* point-to-point batches and bytes sent (hr_dist_mq) */
 };
 
 /* Counts one collective that sent 'bytes' and started at 't0'. */
@@ -271,4 +272,142 @@ hr_status hr_dist_union_i32(const hr_dist *d, const int32_t *mine, int64_t n, in
   *all = v;
   *nall = k;
   return HR_OK;
+}
+
+/* ---------------------------------------------------------------- message queues */
+
+/* A batch goes out when its buffer reaches this size. */
+#define MQ_BATCH (64 * 1024)
+
+typedef struct mq_send {
+  MPI_Request rq;
+  char *buf;
+} mq_send;
+
+struct hr_dist_mq {
+  hr_dist *d;
+  int tag;
+  char **buf;       /* per destination: the batch being filled */
+  size_t *len, *cap;
+  mq_send *sends;   /* batches in flight */
+  int nsends, capsends;
+  char *rbuf;       /* the last received batch */
+  double t_mpi;
+};
+
+hr_status hr_dist_mq_open(const hr_dist *d, int tag, hr_dist_mq **out) {
+  hr_dist_mq *q = calloc(1, sizeof *q);
+  if (q) {
+    q->buf = calloc((size_t)d->size, sizeof *q->buf);
+    q->len = calloc((size_t)d->size, sizeof *q->len);
+    q->cap = calloc((size_t)d->size, sizeof *q->cap);
+  }
+  if (!q || !q->buf || !q->len || !q->cap) {
+    if (q) free(q->buf), free(q->len), free(q->cap);
+    free(q);
+    return HR_ERR_NOMEM;
+  }
+  q->d = (hr_dist *)d;
+  q->tag = tag;
+  *out = q;
+  return HR_OK;
+}
+
+/* Completed sends: their buffers freed, the slots reused. */
+static void mq_reap(hr_dist_mq *q) {
+  for (int i = 0; i < q->nsends;) {
+    int done = 0;
+    MPI_Test(&q->sends[i].rq, &done, MPI_STATUS_IGNORE);
+    if (done) {
+      free(q->sends[i].buf);
+      q->sends[i] = q->sends[--q->nsends];
+    } else {
+      i++;
+    }
+  }
+}
+
+/* Sends the batch for 'p' (if any); 0 when out of memory (then MPI_Abort: a lost batch would
+ * leave its receiver waiting). */
+static void mq_send_batch(hr_dist_mq *q, int p) {
+  if (q->len[p] == 0) return;
+  if (q->nsends == q->capsends) {
+    int nc = q->capsends ? 2 * q->capsends : 16;
+    mq_send *ns = realloc(q->sends, (size_t)nc * sizeof *ns);
+    if (!ns) MPI_Abort(q->d->comm, 1);
+    q->sends = ns, q->capsends = nc;
+  }
+  const double t0 = MPI_Wtime();
+  mq_send *sd = &q->sends[q->nsends++];
+  sd->buf = q->buf[p];
+  MPI_Isend(sd->buf, (int)q->len[p], MPI_BYTE, p, q->tag, q->d->comm, &sd->rq);
+  q->d->msgs++;
+  q->d->msg_bytes += (int64_t)q->len[p];
+  q->buf[p] = NULL;
+  q->len[p] = q->cap[p] = 0;
+  q->t_mpi += MPI_Wtime() - t0;
+}
+
+void *hr_dist_mq_put(hr_dist_mq *q, int dest, size_t n) {
+  if (q->len[dest] + n > MQ_BATCH && q->len[dest] > 0) mq_send_batch(q, dest);
+  if (q->len[dest] + n > q->cap[dest]) {
+    size_t nc = q->cap[dest] ? q->cap[dest] : 4096;
+    while (nc < q->len[dest] + n) nc *= 2;
+    char *b = realloc(q->buf[dest], nc);
+    if (!b) return NULL;
+    q->buf[dest] = b, q->cap[dest] = nc;
+  }
+  void *r = q->buf[dest] + q->len[dest];
+  q->len[dest] += n;
+  return r;
+}
+
+void hr_dist_mq_flush(hr_dist_mq *q) {
+  for (int p = 0; p < q->d->size; p++) mq_send_batch(q, p);
+  mq_reap(q);
+}
+
+int hr_dist_mq_poll(hr_dist_mq *q, int wait, const void **buf, int64_t *n, int *src) {
+  const double t0 = MPI_Wtime();
+  free(q->rbuf);
+  q->rbuf = NULL;
+  int flag = 0, cnt = 0;
+  MPI_Status st;
+  if (wait) {
+    MPI_Probe(MPI_ANY_SOURCE, q->tag, q->d->comm, &st);
+    flag = 1;
+  } else {
+    MPI_Iprobe(MPI_ANY_SOURCE, q->tag, q->d->comm, &flag, &st);
+  }
+  if (flag) {
+    MPI_Get_count(&st, MPI_BYTE, &cnt);
+    q->rbuf = malloc((size_t)(cnt > 0 ? cnt : 1));
+    if (!q->rbuf) MPI_Abort(q->d->comm, 1);
+    MPI_Recv(q->rbuf, cnt, MPI_BYTE, st.MPI_SOURCE, q->tag, q->d->comm, MPI_STATUS_IGNORE);
+    *buf = q->rbuf, *n = cnt, *src = st.MPI_SOURCE;
+  }
+  q->t_mpi += MPI_Wtime() - t0;
+  return flag;
+}
+
+void hr_dist_mq_close(hr_dist_mq **pq) {
+  hr_dist_mq *q = *pq;
+  if (!q) return;
+  hr_dist_mq_flush(q);
+  const double t0 = MPI_Wtime();
+  for (int i = 0; i < q->nsends; i++) {
+    MPI_Wait(&q->sends[i].rq, MPI_STATUS_IGNORE);
+    free(q->sends[i].buf);
+  }
+  q->t_mpi += MPI_Wtime() - t0;
+  q->d->secs += q->t_mpi;
+  for (int p = 0; p < q->d->size; p++) free(q->buf[p]);
+  free(q->buf), free(q->len), free(q->cap), free(q->sends), free(q->rbuf);
+  free(q);
+  *pq = NULL;
+}
+
+void hr_dist_msg_counters(const hr_dist *d, int64_t *msgs, int64_t *bytes) {
+  *msgs = d ? d->msgs : 0;
+  *bytes = d ? d->msg_bytes : 0;
 }

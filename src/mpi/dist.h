@@ -34,4 +34,24 @@ void hr_dist_counters(const hr_dist *d, int64_t *calls, int64_t *bytes, double *
  * pass NULL). */
 hr_status hr_dist_gather(const hr_dist *d, const void *mine, size_t n, void *all);
 
+/* Point-to-point messages for the asynchronous phases (docs/design.md, "Messages"): records
+ * are put into one buffer per destination, which goes out as one MPI_Isend when it is full or
+ * at hr_dist_mq_flush; hr_dist_mq_poll hands over one received batch without waiting. A queue
+ * is local to one phase: the caller knows how many records it must receive (every phase that
+ * uses one counts them), so no termination detection is needed; hr_dist_mq_close waits until
+ * this rank's sends are received. d must not be NULL. */
+typedef struct hr_dist_mq hr_dist_mq;
+hr_status hr_dist_mq_open(const hr_dist *d, int tag, hr_dist_mq **q);
+/* Room for 'n' bytes of a record to rank 'dest' (valid until the next call on q); NULL when out
+ * of memory. */
+void *hr_dist_mq_put(hr_dist_mq *q, int dest, size_t n);
+void hr_dist_mq_flush(hr_dist_mq *q);
+/* One received batch: 1 and '*buf' (owned by q until the next poll), '*n' bytes, '*src'; 0 when
+ * nothing has arrived. With 'wait', blocks until something arrives. */
+int hr_dist_mq_poll(hr_dist_mq *q, int wait, const void **buf, int64_t *n, int *src);
+/* Flushes, waits for every send of q to complete, frees q; adds its counts to the handle's. */
+void hr_dist_mq_close(hr_dist_mq **q);
+/* Point-to-point batches and bytes this rank sent so far. */
+void hr_dist_msg_counters(const hr_dist *d, int64_t *msgs, int64_t *bytes);
+
 #endif
