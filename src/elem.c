@@ -6,6 +6,7 @@
 #include "solver_impl.h"
 #include "vec.h"
 
+#include <assert.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -293,4 +294,40 @@ void hr_elem_open(hr_solver *s, int64_t lo, int64_t hi) {
     const hr_vf_elem ve = {&g, s->el[e].gid, s->el[e].surf};
     s->open[e] = hr_vf_open(&s->vf, ve, s->el[e].parent < 0 ? OPEN_M_ROOT : OPEN_M);
   }
+}
+
+/* Keeps the elements with keep[e] != 0 (which must hold every root and whole sibling groups,
+ * and be closed under parent), in their order; links, the gid map and the children of kept
+ * elements whose children go are renumbered or cut. Subscriptions must be empty. */
+void hr_elem_compact(hr_solver *s, const uint8_t *keep) {
+  int32_t *nu = malloc((size_t)(s->nel > 0 ? s->nel : 1) * sizeof *nu);
+  if (!nu) return; /* nothing lost but memory: keep everything */
+  int32_t n = 0;
+  for (int64_t e = 0; e < s->nel; e++) nu[e] = keep[e] ? n++ : -1;
+  for (int64_t e = 0; e < s->nel; e++) {
+    const int32_t d = nu[e];
+    if (d < 0) continue;
+    hr_elem el = s->el[e];
+    el.parent = el.parent >= 0 ? nu[el.parent] : -1;
+    el.child = el.child >= 0 ? nu[el.child] : -1; /* whole groups: the first decides */
+    s->el[d] = el;
+    memcpy(s->B[d], s->B[e], sizeof s->B[d]);
+    memcpy(s->Bs[d], s->Bs[e], sizeof s->Bs[d]);
+    memcpy(s->G[d], s->G[e], sizeof s->G[d]);
+    memcpy(s->rho[d], s->rho[e], sizeof s->rho[d]);
+    s->Gu[d] = s->Gu[e], s->Gf[d] = s->Gf[e], s->rho_max[d] = s->rho_max[e];
+    s->bref[d] = s->bref[e], s->open[d] = s->open[e], s->bvar[d] = s->bvar[e];
+    s->eown[d] = s->eown[e], s->esub[d] = s->esub[e];
+  }
+  for (int64_t i = 0; i < s->nlinks; i++) {
+    s->links[i].r = nu[s->links[i].r];
+    s->links[i].s = nu[s->links[i].s];
+    assert(s->links[i].r >= 0 && s->links[i].s >= 0);
+  }
+  free(nu);
+  s->nel = n;
+  memset(s->gkey, 0, (size_t)s->gcap * sizeof *s->gkey);
+  for (int32_t e = 0; e < n; e++) gmap_put(s, s->el[e].gid, e);
+  s->sorted = 0;
+  s->nsorted = s->ndead = 0;
 }

@@ -319,6 +319,11 @@ static int index_subs(dpp *p) {
   return 1;
 }
 
+/* Own elements visited between looks at the network, and the stack size below which a rank
+ * sends at once (productive) rather than batching (economical). */
+#define SCHED_CHUNK 256
+#define SCHED_LOW 1024
+
 /* Push-pull over ranks; returns the largest change over this rank's leaves in '*maxc'. A
  * collective (the message phase, then the agreement on failure). */
 static hr_status push_pull_dist(hr_solver *s, double *maxc, hr_err *err) {
@@ -358,7 +363,12 @@ static hr_status push_pull_dist(hr_solver *s, double *maxc, hr_err *err) {
         expect += s->esub[e];                  /* a STORE */
       }
     }
-    /* own elements are visited in stack order; which order does not change any value */
+    /* The scheduler (paper 2.2.2): arrived messages first (a PULL completes a parent, the
+     * paper's highest priority), then a chunk of own elements from the stack. While few own
+     * elements wait, this rank is about to run dry and others may wait for its pushes: the
+     * productive order sends what it has after every chunk. With many waiting, the economical
+     * order lets records collect into full batches (fewer, larger messages). Own elements are
+     * visited in stack order; no order changes any value. */
     while (!p.oom && (p.done < own || p.got < expect)) {
       const void *buf;
       int64_t n;
@@ -366,8 +376,9 @@ static hr_status push_pull_dist(hr_solver *s, double *maxc, hr_err *err) {
       while (!p.oom && hr_dist_mq_poll(p.q, 0, &buf, &n, &src))
         if (!dpp_receive(&p, buf, n)) p.oom = 2;
       if (p.nstack > 0) {
-        for (int k = 0; k < 256 && p.nstack > 0 && !p.oom; k++)
+        for (int k = 0; k < SCHED_CHUNK && p.nstack > 0 && !p.oom; k++)
           dpp_visit(&p, p.stack[--p.nstack]);
+        if (p.nstack < SCHED_LOW) hr_dist_mq_flush(p.q); /* productive */
         continue;
       }
       if (p.done < own || p.got < expect) {

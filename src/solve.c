@@ -562,12 +562,12 @@ hr_status hr_solver_rank_stats(const hr_solver *s, hr_rank_stats *all, hr_err *e
   me.leaves = count_leaves(s);
   me.elements = count_own(s);
   me.ghosts = s->nel - me.elements;
-  /* what the elements and links take: their records, the per-element arrays, the candidate
-   * pool and the link index (capacities, as allocated) */
+  /* what the elements and links take in use (allocations round up to powers of 2): their
+   * records, the per-element arrays and map, the candidate pool and the link index */
   const double per_el = sizeof(hr_elem) + 15 * sizeof(double) + 2 * sizeof(int32_t) + 1 +
                         2 * (sizeof(uint64_t) + sizeof(int32_t));
-  me.elem_mb = (double)s->cap_el * per_el / 1e6;
-  me.link_mb = ((double)s->cap_links * sizeof(hr_link) + (double)s->cap_pool * 4 +
+  me.elem_mb = (double)s->nel * per_el / 1e6;
+  me.link_mb = ((double)s->nlinks * sizeof(hr_link) + (double)s->npool * 4 +
                 (double)s->nrstart * 16 + (double)s->nsorted * 8) / 1e6;
   hr_dist_msg_counters(s->dist, &me.msgs, &me.msg_bytes);
   me.rays = s->rays;

@@ -175,6 +175,8 @@ int32_t hr_elem_find(const hr_solver *s, uint64_t gid);
  * by subdivision: values copied from the parents) if needed; -1 for a gid that cannot be an
  * element of this scene, -2 when out of memory or past a limit. */
 int32_t hr_elem_ensure(hr_solver *s, uint64_t gid);
+/* Drops the elements with keep[e] == 0 (see elem.c for what 'keep' must satisfy). */
+void hr_elem_compact(hr_solver *s, const uint8_t *keep);
 /* Estimates the open fraction (hr_vf_open) of elements [lo, hi), in parallel; needs s->vis. */
 void hr_elem_open(hr_solver *s, int64_t lo, int64_t hi);
 

@@ -63,6 +63,22 @@ for seed in $(seq "${MPI_STRESS:-10}"); do
   rm -rf "$t/f$seed"
 done
 
+# ---------------------------------------------------------------- elements are distributed
+# Each element is owned by exactly one rank (the own counts add up to the one-process element
+# count), no rank owns them all, and every rank holds ghosts (copies of others' elements).
+mpi 4 --size 64x48 --bf-low 1e-2 --threads 1 -o "$t/fd" floor 2> "$t/ranks" >/dev/null
+total=$(grep -o '"elements_all": [0-9]*' "$t/fref/stats.json" | grep -o '[0-9]*$')
+if awk -v total="$total" '
+    /^rank  elements/ { on = 1; next }
+    on && /^element\+link/ { on = 0 }
+    on && NF == 7 { n++; own += $2; if ($2 <= 0 || $2 >= total || $3 <= 0) bad = 1 }
+    END { exit !(n == 4 && own == total && !bad) }' "$t/ranks"; then
+  ok "elements distributed: 4 ranks own $total elements between them, each holds ghosts"
+else
+  bad "elements distributed (one-process count $total)"
+  cat "$t/ranks"
+fi
+
 # ---------------------------------------------------------------- migration
 # HRAD_TEST_MIGRATE=SEED: after every iteration every element moves to a new random rank with
 # the links it receives (hr_solver_migrate, what graph balancing will use): same answer.

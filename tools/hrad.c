@@ -1522,6 +1522,20 @@ static void print_ranks(const hr_rank_stats *r, int n) {
   }
   fprintf(stderr, "imbalance (max/mean busy) %.2f, links max/mean %.2f\n",
           sum[4] > 0 ? hi[4] / (sum[4] / n) : 1, sum[1] > 0 ? hi[1] / (sum[1] / n) : 1);
+  /* memory of the graph (paper 2.2: each rank holds its share) and point-to-point traffic */
+  fprintf(stderr, "rank  elements    ghosts  elem MB  link MB   messages   msg MB\n");
+  /* the whole graph is every rank's own elements and links: a rank's share against 1/P of it */
+  double mem_max = 0, graph = 0;
+  for (int i = 0; i < n; i++) {
+    fprintf(stderr, "%4d %9lld %9lld %8.2f %8.2f %10lld %8.2f\n", r[i].rank,
+            (long long)r[i].elements, (long long)r[i].ghosts, r[i].elem_mb, r[i].link_mb,
+            (long long)r[i].msgs, (double)r[i].msg_bytes / 1e6);
+    const double local = (double)(r[i].elements + r[i].ghosts);
+    mem_max = fmax(mem_max, r[i].elem_mb + r[i].link_mb);
+    graph += r[i].link_mb + (local > 0 ? r[i].elem_mb * (double)r[i].elements / local : 0);
+  }
+  fprintf(stderr, "element+link memory: max %.2f MB a rank, %.2f x 1/P of the graph (%.2f MB)\n",
+          mem_max, graph > 0 ? mem_max / (graph / n) : 1, graph);
   /* per phase: busy and MPI (idle included) seconds, min/mean/max over the ranks */
   static const char *const ph[4] = {"init graph", "refine", "gather", "push-pull"};
   fprintf(stderr, "phase         busy min   mean    max    mpi min   mean    max\n");
