@@ -11,12 +11,13 @@
  *   T(P) = T_init / P + (T_refine + T_gather) * I(P) / P + T_pushpull + C(P)
  *
  * with I(P) the largest rank's share of the links over the mean (load imbalance), push-pull
- * replicated on every rank (docs/design.md, "Distribution") and C(P) the collectives of the
- * bulk-synchronous exchange: per iteration one sum of 40 bytes per element (ring allreduce:
- * 2 log2(P) latencies and 2 (P-1)/P of the data through each node's link) and K small
- * collectives (2 log2(P) latencies each), plus the initial exchange of the links (48 bytes a link,
- * (P-1)/P of them leave their rank) and, with random owners, the links refinement makes, which
- * travel with their candidate lists ((P-1)/P of them, spread over the ranks). Two machines:
+ * spread over the ranks (T_pushpull / P) and C(P) the messages (see comm() and
+ * pushpull_traffic(): docs/design.md, "Distribution", has the protocol): per iteration the
+ * push, pull and store messages of the distributed push-pull, computed exactly for the
+ * assignment, the sum of the roots' radiosities and K small collectives and exchanges; once,
+ * the initial exchange of the links (48 bytes a link, (P-1)/P of them leave their rank); and,
+ * with random owners, the links refinement makes, which travel with their candidate lists
+ * ((P-1)/P of them, spread over the ranks). Two machines:
  * the paper's CM-5 (5 MB/s per node link, 88 us per message; the processors' speed scaled so
  * that one processor takes T1_TARGET seconds, the paper's table 2 time for "floor" when given) and a current cluster (10 GB/s, 2 us, this
  * machine's processor speed). The assumptions are stated in BENCHMARKS.md. */
@@ -35,6 +36,11 @@ typedef struct machine {
   const char *name;
   double alpha, beta, cpu; /* seconds per message, bytes per second, time factor */
 } machine;
+
+static int cmp_u64(const void *a, const void *b) {
+  const uint64_t x = *(const uint64_t *)a, y = *(const uint64_t *)b;
+  return (x > y) - (x < y);
+}
 
 static uint64_t mix(uint64_t z) {
   z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
@@ -59,14 +65,71 @@ static void assign(const hr_solver *s, int P, int random, int32_t *own) {
   for (int64_t e = n; e < s->nel; e++) own[e] = own[s->el[e].parent];
 }
 
-/* Time of the collectives at P ranks on machine m; 'routed' links of 'lbytes' bytes each move
- * during refinement (children of receiver splits whose receiver another rank owns). */
+/* What the message protocol of push-pull sends in one iteration at assignment 'own' (P ranks;
+ * docs/design.md, "Messages"): a PUSH (56 bytes) and a PULL (88) for every tree edge between
+ * ranks, a STORE (184) to every rank that holds a link from an element it does not own. Gives
+ * the largest rank's bytes and destinations, and the most rank changes on a path from a root to
+ * a leaf (the critical path of pushes down and pulls up). */
+typedef struct traffic {
+  double bytes_max, dest_max, depth, stores, edges;
+} traffic;
+
+static traffic pushpull_traffic(const hr_solver *s, int P, const int32_t *own) {
+  traffic tr = {0, 0, 0, 0, 0};
+  double *bytes = calloc((size_t)P, sizeof *bytes);
+  uint8_t *dest = calloc((size_t)P * (size_t)P, 1);
+  int32_t *hops = calloc((size_t)s->nel, sizeof *hops);
+  for (int64_t e = 0; e < s->nel; e++) {
+    const int32_t par = s->el[e].parent;
+    if (par < 0 || own[par] == own[e]) {
+      if (par >= 0) hops[e] = hops[par];
+      continue;
+    }
+    hops[e] = hops[par] + 1; /* parents come before their children */
+    tr.depth = hops[e] > tr.depth ? hops[e] : tr.depth;
+    tr.edges++;
+    bytes[own[par]] += 56, bytes[own[e]] += 88;
+    dest[(size_t)own[par] * P + own[e]] = dest[(size_t)own[e] * P + own[par]] = 1;
+  }
+  /* subscriptions: (source, rank) pairs, from the links grouped by receiver */
+  uint64_t *pairs = malloc((size_t)(s->nlinks > 0 ? s->nlinks : 1) * sizeof *pairs);
+  int64_t np = 0;
+  for (int64_t k = 0; k < s->nlinks; k++) {
+    const hr_link *l = &s->links[k];
+    if (l->Fu < 0 || own[l->s] == own[l->r]) continue;
+    pairs[np++] = (uint64_t)l->s * (uint64_t)P + (uint64_t)own[l->r];
+  }
+  qsort(pairs, (size_t)np, sizeof *pairs, cmp_u64);
+  for (int64_t i = 0; i < np; i++) {
+    if (i > 0 && pairs[i] == pairs[i - 1]) continue;
+    const int64_t j = (int64_t)(pairs[i] / (uint64_t)P);
+    const int r = (int)(pairs[i] % (uint64_t)P);
+    tr.stores++;
+    bytes[own[j]] += 184;
+    dest[(size_t)own[j] * P + r] = 1;
+  }
+  for (int p = 0; p < P; p++) {
+    double d = 0;
+    for (int q = 0; q < P; q++) d += dest[(size_t)p * P + q];
+    tr.dest_max = d > tr.dest_max ? d : tr.dest_max;
+    tr.bytes_max = bytes[p] > tr.bytes_max ? bytes[p] : tr.bytes_max;
+  }
+  free(bytes), free(dest), free(hops), free(pairs);
+  return tr;
+}
+
+/* Communication time at P ranks on machine m: per iteration the push-pull messages (critical
+ * path of 2 x depth latencies, the largest rank's bytes and one latency per destination), the
+ * sum of the roots' radiosities (ring allreduce of 24 bytes a surface) and K small collectives
+ * and exchanges (2 log2 P latencies each); once, the initial exchange of the links; and the
+ * links refinement moves ('routed' of 'lbytes' bytes), spread over the ranks. */
 static double comm(const hr_solver *s, const machine *m, int P, int64_t links0, double routed,
-                   double lbytes) {
+                   double lbytes, const traffic *tr) {
   if (P == 1) return 0;
   const double lg = ceil(log2((double)P)), it = s->iterations;
-  const double sum_bytes = 40.0 * (double)s->nel;
-  const double per_iter = 2 * lg * m->alpha + 2.0 * (P - 1) / P * sum_bytes / m->beta +
+  const double roots = 24.0 * s->scene->nsurfs;
+  const double pp = 2 * tr->depth * m->alpha + tr->bytes_max / m->beta + tr->dest_max * m->alpha;
+  const double per_iter = pp + 2 * lg * m->alpha + 2.0 * (P - 1) / P * roots / m->beta +
                           K_SMALL * 2 * lg * m->alpha;
   const double init = 48.0 * (double)links0 / P * (P - 1) / P / m->beta + (P - 1) * m->alpha;
   return it * per_iter + init + routed / P * lbytes / m->beta;
@@ -107,7 +170,7 @@ int main(int argc, char **argv) {
     const machine *m = &ms[mi];
     printf("\n%s, processor time x %.4g\n", m->name, m->cpu);
     printf("   P  balance  imbalance  init s  refine+gather s  push-pull s  comm s    sum s  "
-           "speed-up  efficiency\n");
+           "speed-up  efficiency  pp-depth  stores/it\n");
     for (int random = 0; random < 2; random++)
       for (int P = 1; P <= 64; P *= 2) {
         assign(s, P, random, own);
@@ -120,12 +183,13 @@ int main(int argc, char **argv) {
          * all of them come from receiver splits: an upper bound) */
         const double routed = random ? (double)(live - s->initial_links) * (P - 1) / P : 0;
         const double lbytes = 48.0 + 4.0 * (double)s->npool / (double)(live > 0 ? live : 1);
-        const double tp = m->cpu * t.push_pull;
-        const double tc = comm(s, m, P, s->initial_links, routed > 0 ? routed : 0, lbytes);
+        const double tp = m->cpu * t.push_pull / P;
+        const traffic tr = pushpull_traffic(s, P, own);
+        const double tc = comm(s, m, P, s->initial_links, routed > 0 ? routed : 0, lbytes, &tr);
         const double sum = ti + trg + tp + tc;
-        printf("%4d  %-7s  %9.3f  %6.2f  %15.2f  %11.2f  %6.2f  %7.2f  %8.2f  %9.0f%%\n", P,
-               random ? "random" : "area", imb, ti, trg, tp, tc, sum, m->cpu * t1 / sum,
-               100 * m->cpu * t1 / sum / P);
+        printf("%4d  %-7s  %9.3f  %6.2f  %15.2f  %11.2f  %6.2f  %7.2f  %8.2f  %9.0f%%  %8.0f  "
+               "%9.0f\n", P, random ? "random" : "area", imb, ti, trg, tp, tc, sum,
+               m->cpu * t1 / sum, 100 * m->cpu * t1 / sum / P, tr.depth, tr.stores);
         free(lr);
       }
   }

@@ -494,22 +494,26 @@ static hr_status exchange(hr_solver *s, const char *rec, const int32_t *dest, in
   *nrecv = 0;
   int64_t *sb = calloc((size_t)P, sizeof *sb), *at = calloc((size_t)P + 1, sizeof *at);
   char *out = malloc((size_t)n * rsize + 1);
-  if (!sb || !at || !out) st = HR_ERR_NOMEM;
-  if ((st = hr_dist_agree(s, st == HR_OK ? st : hr_err_set(err, st, "out of memory"), err))) {
-    free(sb), free(at), free(out);
-    return st;
-  }
-  for (int64_t i = 0; i < n; i++) sb[dest[i]] += (int64_t)rsize;
-  for (int p = 0; p < P; p++) at[p + 1] = at[p] + sb[p];
-  for (int64_t i = 0; i < n; i++) {
-    memcpy(out + at[dest[i]], rec + (size_t)i * rsize, rsize);
-    at[dest[i]] += (int64_t)rsize;
+  if (st == HR_OK && (!sb || !at || !out)) st = hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+  const int failed = st != HR_OK;
+  if (!failed) {
+    for (int64_t i = 0; i < n; i++) sb[dest[i]] += (int64_t)rsize;
+    for (int p = 0; p < P; p++) at[p + 1] = at[p] + sb[p];
+    for (int64_t i = 0; i < n; i++) {
+      memcpy(out + at[dest[i]], rec + (size_t)i * rsize, rsize);
+      at[dest[i]] += (int64_t)rsize;
+    }
   }
   void *r = NULL;
   int64_t tot = 0;
-  st = hr_dist_alltoall(s->dist, out, sb, &r, &tot);
+  if (failed && sb) memset(sb, 0, (size_t)P * sizeof *sb);
+  /* every rank must take part in the exchange: one without memory for its count table aborts */
+  if (!sb) hr_dist_abort(s->dist, 1);
+  const hr_status xs = hr_dist_alltoall_st(s->dist, out, sb, failed, &r, &tot);
   free(sb), free(at), free(out);
-  if (st != HR_OK) return hr_err_set(err, st, "out of memory");
+  if (failed) return st;
+  if (xs == HR_ERR_REMOTE) return hr_err_set(err, xs, "stopped: another rank failed");
+  if (xs != HR_OK) return hr_err_set(err, xs, "out of memory");
   *recv = r;
   *nrecv = tot / (int64_t)rsize;
   return HR_OK;
@@ -660,14 +664,14 @@ typedef struct msg_link {
  * rank's status so far, and every rank returns the same status. */
 static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_status st,
                              hr_err *err) {
-  if ((st = hr_dist_agree(s, st, err)) != HR_OK) return st;
   const int P = s->nranks;
   hr_link *cur = *pcur;
   int64_t n = *pn, nstay = 0;
   int64_t *sb = calloc((size_t)P, sizeof *sb);
   int64_t *at = calloc((size_t)P + 1, sizeof *at);
   char *out = NULL;
-  if (sb && at) {
+  if (!sb) hr_dist_abort(s->dist, 1); /* every rank must take part in the exchange */
+  if (st == HR_OK && at) {
     for (int64_t i = 0; i < n; i++) {
       const int d = s->eown[cur[i].r];
       if (d != s->rank) sb[d] += (int64_t)sizeof(msg_link) + 4 * (int64_t)ncands(&cur[i]);
@@ -675,12 +679,10 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
     for (int p = 0; p < P; p++) at[p + 1] = at[p] + sb[p];
     out = malloc((size_t)(at[P] > 0 ? at[P] : 1));
   }
-  st = out ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
-  if ((st = hr_dist_agree(s, st, err)) != HR_OK) {
-    free(sb), free(at), free(out);
-    return st;
-  }
-  for (int64_t i = 0; i < n; i++) {
+  if (st == HR_OK && !out) st = hr_err_set(err, HR_ERR_NOMEM, "out of memory during refinement");
+  const int failed = st != HR_OK;
+  if (failed) memset(sb, 0, (size_t)P * sizeof *sb);
+  for (int64_t i = 0; i < n && !failed; i++) {
     const hr_link *l = &cur[i];
     const int d = s->eown[l->r];
     if (d == s->rank) {
@@ -700,9 +702,11 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
   }
   void *recv = NULL;
   int64_t tot = 0;
-  st = hr_dist_alltoall(s->dist, out, sb, &recv, &tot);
+  const hr_status xs = hr_dist_alltoall_st(s->dist, out, sb, failed, &recv, &tot);
   free(sb), free(at), free(out);
-  if (st != HR_OK) return hr_err_set(err, st, "out of memory during refinement");
+  if (failed) return st;
+  if (xs == HR_ERR_REMOTE) return hr_err_set(err, xs, "stopped: another rank failed");
+  if (xs != HR_OK) return hr_err_set(err, xs, "out of memory during refinement");
   /* unpack: count, make room, copy */
   int64_t nr = 0, nc = 0;
   for (int64_t o = 0; o < tot; nr++) {

@@ -154,9 +154,14 @@ static int cmp_piece(const void *a, const void *b) {
  * status (a failed allocation is agreed on after the exchange). */
 hr_status hr_dist_alltoall(const hr_dist *d, const void *send, const int64_t *sbytes,
                            void **recv, int64_t *rbytes_total) {
+  return hr_dist_alltoall_st(d, send, sbytes, 0, recv, rbytes_total);
+}
+
+hr_status hr_dist_alltoall_st(const hr_dist *d, const void *send, const int64_t *sbytes,
+                              int failed, void **recv, int64_t *rbytes_total) {
   const int P = d->size, TAG = 7;
   const double t0 = MPI_Wtime();
-  int64_t nreq = 0, sent = 0, off = 0, bad = 0;
+  int64_t nreq = 0, sent = 0, off = 0, bad = failed ? 2 : 0;
   for (int p = 0; p < P; p++) nreq += (sbytes[p] + CHUNK - 1) / CHUNK;
   MPI_Request *rq = malloc((size_t)(nreq > 0 ? nreq : 1) * sizeof *rq);
   piece *pc = NULL;
@@ -227,7 +232,7 @@ hr_status hr_dist_alltoall(const hr_dist *d, const void *send, const int64_t *sb
   hr_dist_max_i64(d, &bad, 1);
   if (bad) {
     free(rb);
-    return HR_ERR_NOMEM;
+    return bad == 2 ? HR_ERR_REMOTE : HR_ERR_NOMEM;
   }
   *recv = rb;
   *rbytes_total = tot;

@@ -23,6 +23,11 @@ void hr_dist_max_i64(const hr_dist *d, int64_t *v, int64_t n);
  * (NBX, dist.c). d must not be NULL. */
 hr_status hr_dist_alltoall(const hr_dist *d, const void *send, const int64_t *sbytes,
                            void **recv, int64_t *rbytes_total);
+/* The same, agreeing on a failure before it: 'failed' non-zero on any rank (which then sends
+ * nothing, sbytes all 0) makes every rank return HR_ERR_REMOTE (the failing rank reports its
+ * own error); a failed allocation here gives HR_ERR_NOMEM on every rank. */
+hr_status hr_dist_alltoall_st(const hr_dist *d, const void *send, const int64_t *sbytes,
+                              int failed, void **recv, int64_t *rbytes_total);
 /* The sorted union without repeats of every rank's 'mine' (n values): '*all' (malloc'd, caller
  * frees) with '*nall' values. d must not be NULL. */
 hr_status hr_dist_union_i32(const hr_dist *d, const int32_t *mine, int64_t n, int32_t **all,
