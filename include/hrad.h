@@ -218,6 +218,7 @@ typedef int (*hr_iter_fn)(void *ud, const hr_solver *s, const hr_iter_info *info
 
 typedef struct hr_timing {
   double init_graph, refine, gather, push_pull, total;
+  double balance; /* graph balancing (distributed runs; the paper's "sim. ann." column) */
 } hr_timing;
 
 typedef struct hr_stats {
@@ -288,6 +289,21 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uin
  * a bad gid or rank or a solver that is not distributed. */
 hr_status hr_solver_migrate(hr_solver *s, const uint64_t *gids, const int32_t *ranks, int64_t n,
                             hr_err *err);
+/* Graph balancing (paper 2.2.5; docs/design.md, "Balancing"): the patch/link graph with
+ * measured weights partitioned, and the elements moved to their new ranks. */
+enum { HR_BALANCE_NONE, HR_BALANCE_ANNEAL, HR_BALANCE_METIS, HR_BALANCE_ORB };
+/* Balances with 'method' (HR_BALANCE_*) after initial linking and whenever an iteration's idle
+ * time (1 - mean over max of the ranks' busy seconds in refinement, gathering and push-pull)
+ * exceeds 'idle' (in [0, 1]); 'alpha' weighs communication against work in the paper's cost
+ * (eq. (5)), in [0, 1]. Call before hr_solver_run on every rank. HR_ERR_INVALID for bad values. */
+hr_status hr_solver_set_balance(hr_solver *s, int method, double alpha, double idle,
+                                hr_err *err);
+/* Balances now (a collective; a no-op in one process or for HR_BALANCE_NONE). */
+hr_status hr_solver_balance(hr_solver *s, int method, hr_err *err);
+/* Writes the patch/link graph (nodes with gid, parent gid, work and centre; edges with their
+ * weights) to 'path' as text (rank 0 writes; a collective). Format: docs/design.md. */
+hr_status hr_solver_dump_graph(hr_solver *s, const char *path, hr_err *err);
+
 /* Distributed runs: brings every leaf to rank 0 (a collective), where hr_solver_leaves then
  * returns all of them; call it after hr_solver_run (and in the iteration callback before
  * per-iteration pictures). A no-op in one process. */

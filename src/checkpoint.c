@@ -22,7 +22,7 @@
 #include <string.h>
 
 #define MAGIC "HRADCKP1"
-#define VERSION 3u
+#define VERSION 4u
 
 /* ---------------------------------------------------------------- hashing */
 

@@ -402,6 +402,7 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
   if ((st = check_contracting(s, abs, *nnew, err)) != HR_OK) return st;
   update_unit(s);
   double td = hr_now();
+  s->iter_busy = (td - ta) - (mpi_secs(s) - ma);
   s->mpi_t[1] += mb - ma, s->mpi_t[2] += mc - mb, s->mpi_t[3] += mpi_secs(s) - mc;
   s->t.refine += tb - ta;
   s->t.gather += tc - tb;
@@ -454,6 +455,34 @@ static void advance(hr_solver *s, double change, int64_t nnew, int stop) {
 
 static hr_status test_migrate(hr_solver *s, hr_err *err);
 
+/* Iterations between two balancings at least (the first iterations after one show its effect). */
+#define BALANCE_GAP 3
+
+/* The paper's trigger (2.2.5): balance when the last iteration's idle time, 1 - mean / max of
+ * the ranks' busy seconds, exceeds the threshold. A collective in distributed runs. */
+static hr_status maybe_balance(hr_solver *s, hr_err *err) {
+  if (!s->dist || s->bal_method == HR_BALANCE_NONE) return HR_OK;
+  double v[2] = {s->iter_busy, s->iter_busy};
+  hr_dist_max_f64(s->dist, v, 1);
+  hr_dist_sum_f64(s->dist, v + 1, 1);
+  const double idle = v[0] > 0 ? 1 - v[1] / s->nranks / v[0] : 0;
+  if (idle <= s->bal_idle || s->iterations - s->bal_last < BALANCE_GAP) return HR_OK;
+  s->bal_last = s->iterations;
+  return hr_solver_balance(s, s->bal_method, err);
+}
+
+hr_status hr_solver_set_balance(hr_solver *s, int method, double alpha, double idle,
+                                hr_err *err) {
+  if (method < HR_BALANCE_NONE || method > HR_BALANCE_ORB)
+    return hr_err_set(err, HR_ERR_INVALID, "unknown balancing method %d", method);
+  if (!(alpha >= 0 && alpha <= 1) || !(idle >= 0 && idle <= 1))
+    return hr_err_set(err, HR_ERR_INVALID, "balancing: alpha and idle must be in [0, 1]");
+  s->bal_method = method;
+  s->bal_alpha = alpha;
+  s->bal_idle = idle;
+  return HR_OK;
+}
+
 hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
   hr_status st;
   omp_set_num_threads(s->threads);
@@ -464,6 +493,8 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     hr_elem_open(s, 0, s->nel);
     if ((st = hr_link_init(s, err)) != HR_OK) return st;
     if ((st = hr_link_subscribe(s, err)) != HR_OK) return st;
+    if ((st = hr_solver_balance(s, s->bal_method, err)) != HR_OK) return st;
+    s->bal_last = 0;
     hr_solver_sync_counts(s);
     s->t.init_graph = hr_now() - t0;
     s->mpi_t[0] = mpi_secs(s) - m0;
@@ -478,6 +509,7 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     if ((st = iterate(s, &change, &nnew, err)) != HR_OK) return st;
     advance(s, change, nnew, 0);
     if (s->migrate_seed && !s->done && (st = test_migrate(s, err)) != HR_OK) return st;
+    if (!s->done && (st = maybe_balance(s, err)) != HR_OK) return st;
     s->t.total = hr_now() - s->t_start;
     /* Display ({15}) and checkpoints: the state is complete here, and s->bf_e is already the
      * next iteration's. */

@@ -141,6 +141,12 @@ struct hr_solver {
   /* distributed runs: every leaf (gid order) gathered on rank 0 by hr_solver_collect */
   hr_leaf *coll;
   int64_t ncoll;
+  /* graph balancing (balance.c): method, alpha of eq. (5), idle threshold, balancings done */
+  int bal_method;
+  double bal_alpha, bal_idle;
+  int64_t nbalance;
+  int bal_last;       /* the iteration after which it last balanced */
+  double iter_busy;   /* this rank's busy seconds in the last iteration (outside MPI) */
   uint64_t migrate_seed; /* test hook HRAD_TEST_MIGRATE=SEED: new random owners every iteration */
   /* Test hook (HRAD_TEST_FAIL=RANK:PHASE:ITER, read by hr_solver_set_dist): rank 'fail_rank'
    * fails with "out of memory" in phase fail_phase (HR_PHASE_*) of iteration fail_iter. */

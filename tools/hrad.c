@@ -75,6 +75,9 @@ typedef struct cli {
   hr_options opt;
   int balance_random;     /* --balance random[:SEED] (the default) or area */
   uint64_t balance_seed;
+  int balance_method;     /* --balance none|anneal|metis|orb (HR_BALANCE_*) */
+  double balance_alpha, balance_idle;
+  const char *dump_graph; /* --dump-graph FILE */
   const char *scene_arg;
   const char *outdir; /* -o as given */
   int quiet;
@@ -503,6 +506,13 @@ static void usage(void) {
       "                       (default, N = 1): the best measured balance of work\n"
       "  --balance area       whole surfaces to ranks by area, largest first\n"
       "                       (the answer is the same for every assignment)\n"
+      "  --balance anneal|metis|orb|none  start with whole surfaces by area, then balance the\n"
+      "                       patch/link graph after initial linking and whenever an\n"
+      "                       iteration's idle time passes --balance-idle: simulated\n"
+      "                       annealing (the paper's 2.2.5), METIS, or recursive bisection\n"
+      "  --balance-alpha A    weight of communication against work in the cost (0.5)\n"
+      "  --balance-idle X     idle fraction that triggers balancing (0.1)\n"
+      "  --dump-graph FILE    write the final patch/link graph (nodes, weights, edges)\n"
       "\n"
       "Checking (an independent Monte Carlo path tracer, README 'Checking the light'):\n"
       "  --verify N           after solving, estimate every polygon with N paths, print a\n"
@@ -695,6 +705,7 @@ static void parse_args(cli *c, int argc, char **argv) {
   c->h = 600;
   c->ckpt_every = CKPT_EVERY;
   c->balance_random = 1, c->balance_seed = 1;
+  c->balance_method = HR_BALANCE_NONE, c->balance_alpha = 0.5, c->balance_idle = 0.1;
   int opts_done = 0;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
@@ -763,11 +774,34 @@ static void parse_args(cli *c, int argc, char **argv) {
       if (!*c->resume) die_usage("--resume: empty file name");
     } else if (!strcmp(a, "--balance")) {
       const char *v = NEXT();
+      static const char *const graph[] = {"none", "anneal", "metis", "orb"};
+      c->balance_method = HR_BALANCE_NONE;
       if (!strcmp(v, "area")) c->balance_random = 0;
       else if (!strcmp(v, "random")) c->balance_random = 1, c->balance_seed = 1;
       else if (!strncmp(v, "random:", 7))
         c->balance_random = 1, c->balance_seed = parse_seed(v + 7);
-      else die_usage("--balance must be 'random', 'random:SEED' or 'area', got '%s'", v);
+      else {
+        int k = 0;
+        while (k < 4 && strcmp(v, graph[k])) k++;
+        if (k == 4)
+          die_usage("--balance must be 'random', 'random:SEED', 'area', 'none', 'anneal', "
+                    "'metis' or 'orb', got '%s'", v);
+        /* the graph methods start from whole surfaces by area, then move subtrees */
+        c->balance_random = 0, c->balance_method = k;
+      }
+    } else if (!strcmp(a, "--balance-alpha")) {
+      const char *v = NEXT();
+      c->balance_alpha = parse_real(a, v);
+      if (!(c->balance_alpha >= 0 && c->balance_alpha <= 1))
+        die_usage("--balance-alpha must be in [0, 1], got '%s'", v);
+    } else if (!strcmp(a, "--balance-idle")) {
+      const char *v = NEXT();
+      c->balance_idle = parse_real(a, v);
+      if (!(c->balance_idle >= 0 && c->balance_idle <= 1))
+        die_usage("--balance-idle must be in [0, 1], got '%s'", v);
+    } else if (!strcmp(a, "--dump-graph")) {
+      c->dump_graph = NEXT();
+      if (!*c->dump_graph) die_usage("--dump-graph: empty file name");
     } else if (!strcmp(a, "--camera")) parse_camera(c, NEXT());
     else if (!strcmp(a, "--emit")) parse_emit(c, NEXT());
     else if (!strcmp(a, "--size")) parse_size(c, NEXT());
@@ -1630,6 +1664,8 @@ int main(int argc, char **argv) {
   if (hr_dist_size(g_dist) > 1) { /* --balance random:N scatters elements (N = 0 acts as 1) */
     const uint64_t scatter = c.balance_random ? (c.balance_seed ? c.balance_seed : 1) : 0;
     check(hr_solver_set_dist(s, g_dist, NULL, scatter, &err), &err);
+    check(hr_solver_set_balance(s, c.balance_method, c.balance_alpha, c.balance_idle, &err),
+          &err);
   }
   if (c.resume) {
     check(hr_solver_resume(s, c.resume, &err), &err);
@@ -1653,6 +1689,7 @@ int main(int argc, char **argv) {
   st = hr_solver_run(s, on_iter, &c, &err);
   const int nranks = hr_dist_size(g_dist);
   if (nranks > 1 && st == HR_OK) st = hr_solver_collect(s, &err); /* the leaves to rank 0 */
+  if (st == HR_OK && c.dump_graph) st = hr_solver_dump_graph(s, c.dump_graph, &err);
   hr_rank_stats *ranks = NULL;
   if (nranks > 1 && st == HR_OK) { /* every rank's share, to rank 0 */
     if (g_rank == 0) ranks = xrealloc(NULL, (size_t)nranks * sizeof *ranks);

@@ -117,6 +117,30 @@ hr_status hr_dist_gather(const hr_dist *d, const void *mine, size_t n, void *all
   return HR_OK;
 }
 
+void hr_dist_bcast_from(const hr_dist *d, int root, void *buf, size_t n) {
+  if (!d || d->size == 1) return;
+  const double t0 = MPI_Wtime();
+  for (size_t o = 0; o < n; o += (size_t)CHUNK) {
+    const size_t k = n - o < (size_t)CHUNK ? n - o : (size_t)CHUNK;
+    MPI_Bcast((char *)buf + o, (int)k, MPI_BYTE, root, d->comm);
+  }
+  count((hr_dist *)d, d->rank == root ? (int64_t)n : 0, t0);
+}
+
+void hr_dist_bcast(const hr_dist *d, void *buf, size_t n) { hr_dist_bcast_from(d, 0, buf, n); }
+
+int hr_dist_argmin(const hr_dist *d, double v) {
+  if (!d || d->size == 1) return 0;
+  struct {
+    double v;
+    int rank;
+  } in = {v, d->rank}, out;
+  const double t0 = MPI_Wtime();
+  MPI_Allreduce(&in, &out, 1, MPI_DOUBLE_INT, MPI_MINLOC, d->comm);
+  count((hr_dist *)d, (int64_t)sizeof in, t0);
+  return out.rank;
+}
+
 void hr_dist_sum_f64(const hr_dist *d, double *v, int64_t n) {
   allreduce(d, v, n, MPI_DOUBLE, sizeof *v, MPI_SUM);
 }

@@ -39,6 +39,12 @@ void hr_dist_counters(const hr_dist *d, int64_t *calls, int64_t *bytes, double *
  * pass NULL). */
 hr_status hr_dist_gather(const hr_dist *d, const void *mine, size_t n, void *all);
 
+/* 'n' bytes of rank 0's (or rank 'root''s) 'buf' to every rank's 'buf'. d may be NULL. */
+void hr_dist_bcast(const hr_dist *d, void *buf, size_t n);
+void hr_dist_bcast_from(const hr_dist *d, int root, void *buf, size_t n);
+/* The rank whose 'v' is smallest (ties: the lowest rank); 0 for NULL. */
+int hr_dist_argmin(const hr_dist *d, double v);
+
 /* Point-to-point messages for the asynchronous phases (docs/design.md, "Messages"): records
  * are put into one buffer per destination, which goes out as one MPI_Isend when it is full or
  * at hr_dist_mq_flush; hr_dist_mq_poll hands over one received batch without waiting. A queue

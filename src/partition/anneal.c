@@ -498,7 +498,7 @@ static void sort_members(const int32_t *cluster, int n, int nc, int32_t *members
 /* Clusters g, anneals the clustered graph from the majority parts of 'part' and writes the
  * result, projected onto the nodes, into 'out'. Returns 0 when out of memory. */
 static int anneal_clustered(const hr_graph *g, int nparts, double alpha, const int32_t *part,
-                            uint64_t *rng, int32_t *out) {
+                            double effort, uint64_t *rng, int32_t *out) {
   const size_t n = (size_t)(g->n > 0 ? g->n : 1);
   int32_t *cluster = malloc(n * sizeof *cluster), *members = malloc(n * sizeof *members);
   int64_t *first = malloc((n + 1) * sizeof *first);
@@ -515,7 +515,7 @@ static int anneal_clustered(const hr_graph *g, int nparts, double alpha, const i
   if (ok) {
     const hr_graph cg = owned_view(&o);
     int64_t moves = (int64_t)COARSE_MOVES_PER_NODE * o.n;
-    moves = moves > COARSE_MOVES_MIN ? moves : COARSE_MOVES_MIN;
+    moves = (int64_t)(effort * (double)(moves > COARSE_MOVES_MIN ? moves : COARSE_MOVES_MIN));
     ok = anneal_graph(&cg, nparts, alpha, cpart, COARSE_HOT, moves, rng);
   }
   if (ok)
@@ -555,7 +555,12 @@ static double exact_cost(const hr_graph *g, const int32_t *part, int nparts, dou
 
 int hr_partition_anneal(const hr_graph *g, int nparts, double alpha, uint64_t seed,
                         int32_t *part) {
-  if (!valid_input(g, nparts, part)) return 0;
+  return hr_partition_anneal_effort(g, nparts, alpha, seed, 1.0, part);
+}
+
+int hr_partition_anneal_effort(const hr_graph *g, int nparts, double alpha, uint64_t seed,
+                               double effort, int32_t *part) {
+  if (!valid_input(g, nparts, part) || !(effort > 0)) return 0;
   if (nparts == 1 || g->n == 0) return 1; /* nothing to move */
   const size_t n = (size_t)g->n;
   int32_t *start = malloc(n * sizeof *start), *coarse = malloc(n * sizeof *coarse);
@@ -563,7 +568,7 @@ int hr_partition_anneal(const hr_graph *g, int nparts, double alpha, uint64_t se
   uint64_t rng = seed;
   if (ok) {
     memcpy(start, part, n * sizeof *part);
-    ok = anneal_clustered(g, nparts, alpha, start, &rng, coarse);
+    ok = anneal_clustered(g, nparts, alpha, start, effort, &rng, coarse);
   }
   double s_start = 0.0, s_coarse = 0.0, s_end = 0.0;
   const double z_start = ok ? exact_cost(g, start, nparts, alpha, &s_start) : -1.0;
@@ -573,7 +578,7 @@ int hr_partition_anneal(const hr_graph *g, int nparts, double alpha, uint64_t se
    * the parts of a good start would otherwise cost it its quality */
   if (ok && is_better(z_coarse, s_coarse, z_start, s_start))
     memcpy(part, coarse, n * sizeof *part);
-  const int64_t fine_moves = (int64_t)FINE_MOVES_PER_NODE * g->n;
+  const int64_t fine_moves = (int64_t)(effort * FINE_MOVES_PER_NODE * (double)g->n);
   if (ok) ok = anneal_graph(g, nparts, alpha, part, FINE_HOT, fine_moves, &rng);
   const double z_end = ok ? exact_cost(g, part, nparts, alpha, &s_end) : -1.0;
   ok = ok && z_end >= 0.0;

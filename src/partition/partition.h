@@ -46,4 +46,9 @@ int hr_partition_orb(const double *xyz, const double *w, int n, int nparts, int3
 int hr_partition_anneal(const hr_graph *g, int nparts, double alpha, uint64_t seed,
                         int32_t *part);
 
+/* The same with every proposal budget times 'effort' (> 0): the paper's "very cautious"
+ * annealing is a long one (effort 16, say). */
+int hr_partition_anneal_effort(const hr_graph *g, int nparts, double alpha, uint64_t seed,
+                               double effort, int32_t *part);
+
 #endif

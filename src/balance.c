@@ -1,0 +1,337 @@
+/* balance.c: graph balancing of a distributed run (paper 2.2.5): the patch/link graph with
+ * measured weights, partitioned by the paper's clustering and simulated annealing, by METIS or
+ * by orthogonal recursive bisection (src/partition/, pure graph code), and the elements moved to
+ * their new ranks (hr_solver_migrate).
+ *
+ * The graph: one node per element (gid order), its weight W the work that stays with the
+ * element's owner: the links it receives (each is gathered and tested every iteration) plus one
+ * (its push-pull); edges are the links (an element receives from another: weight 1 per link,
+ * what a cut link costs in store messages and ghost state) and the tree edges (parent and child:
+ * weight 2, a push and a pull). Rank 0 gathers it; for annealing every rank runs its own chain
+ * from the same start (ORB's partition) with its own seed, and the best Z wins (the paper's
+ * parallel annealing, its reference [1], one period). A new partition is expressed as a subtree
+ * map: an element is listed only where its rank differs from its parent's. */
+#include "mpi/dist.h"
+#include "partition/partition.h"
+#include "solver_impl.h"
+
+#include <errno.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* What each rank sends rank 0 about one own element. */
+typedef struct node_rec {
+  uint64_t gid, parent; /* parent gid, 0 for a root */
+  double w, xyz[3];
+} node_rec;
+
+/* A link edge as rank 0 receives it (receiver and source gid). */
+typedef struct edge_rec {
+  uint64_t a, b;
+} edge_rec;
+
+/* The gathered graph on rank 0 (and, for annealing, on every rank). */
+typedef struct bgraph {
+  int32_t n;
+  uint64_t *gid;   /* n, increasing */
+  uint64_t *pgid;  /* n, parent gid or 0 */
+  double *w, *xyz; /* n, 3n */
+  int64_t *xadj;
+  int32_t *adj;
+  double *c;
+} bgraph;
+
+static void bgraph_free(bgraph *g) {
+  free(g->gid), free(g->pgid), free(g->w), free(g->xyz), free(g->xadj), free(g->adj), free(g->c);
+  memset(g, 0, sizeof *g);
+}
+
+static int cmp_node(const void *a, const void *b) {
+  const node_rec *x = a, *y = b;
+  return x->gid < y->gid ? -1 : x->gid > y->gid;
+}
+
+static int cmp_edge(const void *a, const void *b) {
+  const edge_rec *x = a, *y = b;
+  if (x->a != y->a) return x->a < y->a ? -1 : 1;
+  return x->b < y->b ? -1 : x->b > y->b;
+}
+
+static int32_t node_of(const bgraph *g, uint64_t gid) {
+  int32_t lo = 0, hi = g->n;
+  while (lo < hi) {
+    int32_t m = lo + (hi - lo) / 2;
+    if (g->gid[m] < gid) lo = m + 1;
+    else hi = m;
+  }
+  return lo < g->n && g->gid[lo] == gid ? lo : -1;
+}
+
+/* Rank 0 gets every rank's records ('mine', n of 'size' bytes): '*all', '*nall'. A collective. */
+static hr_status to_rank0(hr_solver *s, const void *mine, int64_t n, size_t size, void **all,
+                          int64_t *nall) {
+  *all = NULL;
+  *nall = 0;
+  if (!s->dist) {
+    void *c = malloc((size_t)(n > 0 ? n : 1) * size);
+    if (!c) return HR_ERR_NOMEM;
+    if (n > 0) memcpy(c, mine, (size_t)n * size);
+    *all = c;
+    *nall = n;
+    return HR_OK;
+  }
+  int64_t *sb = calloc((size_t)s->nranks, sizeof *sb);
+  if (!sb) hr_dist_abort(s->dist, 1);
+  sb[0] = n * (int64_t)size;
+  int64_t tot = 0;
+  hr_status st = hr_dist_alltoall(s->dist, mine, sb, all, &tot);
+  free(sb);
+  *nall = tot / (int64_t)size;
+  return st;
+}
+
+/* Builds the CSR graph on rank 0 from the gathered nodes and link edges (both consumed). */
+static int build_graph(bgraph *g, node_rec *nodes, int64_t nn, edge_rec *ed, int64_t ne) {
+  qsort(nodes, (size_t)nn, sizeof *nodes, cmp_node);
+  g->n = (int32_t)nn;
+  g->gid = malloc((size_t)(nn + 1) * sizeof *g->gid);
+  g->pgid = malloc((size_t)(nn + 1) * sizeof *g->pgid);
+  g->w = malloc((size_t)(nn + 1) * sizeof *g->w);
+  g->xyz = malloc((size_t)(3 * nn + 1) * sizeof *g->xyz);
+  if (!g->gid || !g->pgid || !g->w || !g->xyz) return 0;
+  for (int64_t i = 0; i < nn; i++) {
+    g->gid[i] = nodes[i].gid, g->pgid[i] = nodes[i].parent, g->w[i] = nodes[i].w;
+    memcpy(g->xyz + 3 * i, nodes[i].xyz, sizeof nodes[i].xyz);
+  }
+  /* both directions of every link and tree edge, as node pairs (a, b) with a != b; the pair's
+   * weight is its count (links) or 2 (tree), summed over repeats */
+  edge_rec *e2 = malloc((size_t)(2 * ne + 2 * nn + 1) * sizeof *e2);
+  if (!e2) return 0;
+  int64_t m = 0;
+  for (int64_t k = 0; k < ne; k++) {
+    const int32_t a = node_of(g, ed[k].a), b = node_of(g, ed[k].b);
+    if (a < 0 || b < 0 || a == b) continue;
+    e2[m++] = (edge_rec){(uint64_t)a, (uint64_t)b};
+    e2[m++] = (edge_rec){(uint64_t)b, (uint64_t)a};
+  }
+  const int64_t mlinks = m;
+  for (int32_t i = 0; i < g->n; i++) {
+    const int32_t p = g->pgid[i] ? node_of(g, g->pgid[i]) : -1;
+    if (p < 0) continue;
+    e2[m++] = (edge_rec){(uint64_t)i, (uint64_t)p};
+    e2[m++] = (edge_rec){(uint64_t)p, (uint64_t)i};
+  }
+  /* weights travel with the pairs through the sort */
+  typedef struct wpair {
+    edge_rec e;
+    double c;
+  } wpair;
+  wpair *wp = malloc((size_t)(m + 1) * sizeof *wp);
+  if (!wp) {
+    free(e2);
+    return 0;
+  }
+  for (int64_t k = 0; k < m; k++) wp[k] = (wpair){e2[k], k < mlinks ? 1.0 : 2.0};
+  free(e2);
+  qsort(wp, (size_t)m, sizeof *wp, cmp_edge); /* by (a, b): the record starts with e */
+  g->xadj = calloc((size_t)g->n + 1, sizeof *g->xadj);
+  g->adj = malloc((size_t)(m + 1) * sizeof *g->adj);
+  g->c = malloc((size_t)(m + 1) * sizeof *g->c);
+  if (!g->xadj || !g->adj || !g->c) {
+    free(wp);
+    return 0;
+  }
+  int64_t u = 0;
+  for (int64_t k = 0; k < m; k++) {
+    if (k > 0 && wp[k].e.a == wp[k - 1].e.a && wp[k].e.b == wp[k - 1].e.b) {
+      g->c[u - 1] += wp[k].c; /* the same pair again: add */
+      continue;
+    }
+    g->adj[u] = (int32_t)wp[k].e.b;
+    g->c[u] = wp[k].c;
+    g->xadj[wp[k].e.a + 1]++;
+    u++;
+  }
+  for (int32_t i = 0; i < g->n; i++) g->xadj[i + 1] += g->xadj[i];
+  free(wp);
+  return 1;
+}
+
+/* Gathers the graph on rank 0 ('g' filled there; zeroed elsewhere). A collective. */
+static hr_status gather_graph(hr_solver *s, bgraph *g, hr_err *err) {
+  memset(g, 0, sizeof *g);
+  int64_t nown = 0, nl = 0;
+  for (int64_t e = 0; e < s->nel; e++) nown += hr_owns(s, e);
+  for (int64_t k = 0; k < s->nlinks; k++) nl += s->links[k].Fu >= 0;
+  node_rec *nodes = malloc((size_t)(nown + 1) * sizeof *nodes);
+  edge_rec *ed = malloc((size_t)(nl + 1) * sizeof *ed);
+  int64_t *recv = calloc((size_t)s->nel + 1, sizeof *recv);
+  if (!nodes || !ed || !recv) hr_dist_abort(s->dist, 1); /* every rank must take part */
+  for (int64_t k = 0; k < s->nlinks; k++)
+    if (s->links[k].Fu >= 0) recv[s->links[k].r]++;
+  int64_t i = 0;
+  for (int64_t e = 0; e < s->nel; e++) {
+    if (!hr_owns(s, e)) continue;
+    const int32_t p = s->el[e].parent;
+    nodes[i++] = (node_rec){s->el[e].gid, p >= 0 ? s->el[p].gid : 0, (double)recv[e] + 1.0,
+                            {s->el[e].c.x, s->el[e].c.y, s->el[e].c.z}};
+  }
+  i = 0;
+  for (int64_t k = 0; k < s->nlinks; k++)
+    if (s->links[k].Fu >= 0) ed[i++] = (edge_rec){s->el[s->links[k].r].gid, s->el[s->links[k].s].gid};
+  free(recv);
+  void *an = NULL, *ae = NULL;
+  int64_t nn = 0, ne = 0;
+  hr_status st = to_rank0(s, nodes, nown, sizeof *nodes, &an, &nn);
+  free(nodes);
+  if (st == HR_OK) st = to_rank0(s, ed, nl, sizeof *ed, &ae, &ne);
+  free(ed);
+  if (st == HR_OK && s->rank == 0 && !build_graph(g, an, nn, ae, ne)) st = HR_ERR_NOMEM;
+  free(an), free(ae);
+  if (st != HR_OK) bgraph_free(g);
+  return hr_dist_agree(s, st == HR_OK ? st : hr_err_set(err, st, "out of memory (balancing)"),
+                       err);
+}
+
+static hr_graph view(const bgraph *g) {
+  return (hr_graph){g->n, g->xadj, g->adj, g->w, g->c};
+}
+
+/* Every rank gets rank 0's graph (annealing runs a chain on each). A collective. */
+static hr_status share_graph(hr_solver *s, bgraph *g) {
+  int64_t hdr[2] = {g->n, g->n ? g->xadj[g->n] : 0};
+  hr_dist_bcast(s->dist, hdr, sizeof hdr);
+  if (s->rank != 0) {
+    g->n = (int32_t)hdr[0];
+    g->gid = malloc((size_t)(hdr[0] + 1) * sizeof *g->gid);
+    g->w = malloc((size_t)(hdr[0] + 1) * sizeof *g->w);
+    g->xyz = malloc((size_t)(3 * hdr[0] + 1) * sizeof *g->xyz);
+    g->xadj = malloc((size_t)(hdr[0] + 1) * sizeof *g->xadj);
+    g->adj = malloc((size_t)(hdr[1] + 1) * sizeof *g->adj);
+    g->c = malloc((size_t)(hdr[1] + 1) * sizeof *g->c);
+    if (!g->gid || !g->w || !g->xyz || !g->xadj || !g->adj || !g->c) hr_dist_abort(s->dist, 1);
+  }
+  hr_dist_bcast(s->dist, g->w, (size_t)hdr[0] * sizeof *g->w);
+  hr_dist_bcast(s->dist, g->xyz, (size_t)(3 * hdr[0]) * sizeof *g->xyz);
+  hr_dist_bcast(s->dist, g->xadj, (size_t)(hdr[0] + 1) * sizeof *g->xadj);
+  hr_dist_bcast(s->dist, g->adj, (size_t)hdr[1] * sizeof *g->adj);
+  hr_dist_bcast(s->dist, g->c, (size_t)hdr[1] * sizeof *g->c);
+  return HR_OK;
+}
+
+/* The partition of 'method' for P parts into part[] (rank 0's graph; for annealing every
+ * rank's). 0 when out of memory. */
+static int partition(hr_solver *s, const bgraph *g, int method, int P, int32_t *part) {
+  const hr_graph v = view(g);
+  switch (method) {
+  case HR_BALANCE_METIS:
+    return hr_partition_metis(&v, P, part);
+  case HR_BALANCE_ORB:
+    return hr_partition_orb(g->xyz, g->w, g->n, P, part);
+  default: /* annealing from ORB's partition */
+    if (!hr_partition_orb(g->xyz, g->w, g->n, P, part)) return 0;
+    return hr_partition_anneal(&v, P, s->bal_alpha, s->opt.seed * 1000003 + (uint64_t)s->rank +
+                                                        (uint64_t)s->nbalance * 7919,
+                               part);
+  }
+}
+
+/* The subtree map of a partition: roots always, other elements where their part differs from
+ * their parent's. Returns the count; gids and ranks (n each) filled. */
+static int64_t subtree_map(const bgraph *g, const int32_t *part, uint64_t *gids, int32_t *ranks) {
+  int64_t m = 0;
+  for (int32_t i = 0; i < g->n; i++) {
+    const int32_t p = g->pgid[i] ? node_of(g, g->pgid[i]) : -1;
+    if (p >= 0 && part[p] == part[i]) continue;
+    gids[m] = g->gid[i], ranks[m++] = part[i];
+  }
+  return m;
+}
+
+hr_status hr_solver_balance(hr_solver *s, int method, hr_err *err) {
+  if (!s->dist || method == HR_BALANCE_NONE) return HR_OK;
+  const double t0 = hr_now();
+  bgraph g;
+  hr_status st = gather_graph(s, &g, err);
+  if (st != HR_OK) return st;
+  const int P = s->nranks;
+  if (method == HR_BALANCE_ANNEAL) share_graph(s, &g);
+  int32_t *part = NULL;
+  int ok = 1;
+  if (s->rank == 0 || method == HR_BALANCE_ANNEAL) {
+    part = malloc((size_t)(g.n + 1) * sizeof *part);
+    ok = part && partition(s, &g, method, P, part);
+  }
+  if (!hr_dist_any(s->dist, !ok)) {
+    if (method == HR_BALANCE_ANNEAL) { /* the chain with the lowest Z wins (ties: lowest rank) */
+      const hr_graph v = view(&g);
+      const double z = hr_partition_cost(&v, part, P, s->bal_alpha, NULL, NULL);
+      const int win = hr_dist_argmin(s->dist, z);
+      hr_dist_bcast_from(s->dist, win, part, (size_t)g.n * sizeof *part);
+    }
+  } else {
+    st = hr_err_set(err, HR_ERR_NOMEM, "out of memory (balancing)");
+  }
+  /* rank 0 makes the subtree map; every rank gets it and migrates */
+  int64_t m = 0;
+  uint64_t *gids = NULL;
+  int32_t *ranks = NULL;
+  if (st == HR_OK && s->rank == 0) {
+    gids = malloc((size_t)(g.n + 1) * sizeof *gids);
+    ranks = malloc((size_t)(g.n + 1) * sizeof *ranks);
+    if (!gids || !ranks) hr_dist_abort(s->dist, 1);
+    m = subtree_map(&g, part, gids, ranks);
+  }
+  free(part);
+  if (st == HR_OK) {
+    hr_dist_bcast(s->dist, &m, sizeof m);
+    if (s->rank != 0) {
+      gids = malloc((size_t)(m + 1) * sizeof *gids);
+      ranks = malloc((size_t)(m + 1) * sizeof *ranks);
+      if (!gids || !ranks) hr_dist_abort(s->dist, 1);
+    }
+    hr_dist_bcast(s->dist, gids, (size_t)m * sizeof *gids);
+    hr_dist_bcast(s->dist, ranks, (size_t)m * sizeof *ranks);
+    st = hr_solver_migrate(s, gids, ranks, m, err);
+  }
+  free(gids), free(ranks);
+  bgraph_free(&g);
+  s->nbalance++;
+  s->t.balance += hr_now() - t0;
+  return st;
+}
+
+hr_status hr_solver_dump_graph(hr_solver *s, const char *path, hr_err *err) {
+  bgraph g;
+  hr_status st = gather_graph(s, &g, err);
+  if (st != HR_OK || s->rank != 0) return st;
+  char tmp[4200];
+  snprintf(tmp, sizeof tmp, "%s.tmp", path);
+  FILE *f = fopen(tmp, "w");
+  int bad = !f;
+  if (f) {
+    /* nodes (gid, parent gid, work, centre) and edges (each once, u < v, weight) */
+    fprintf(f, "hrad-graph 1\nnodes %d\n", g.n);
+    for (int32_t i = 0; i < g.n; i++)
+      fprintf(f, "%llx %llx %.17g %.17g %.17g %.17g\n", (unsigned long long)g.gid[i],
+              (unsigned long long)g.pgid[i], g.w[i], g.xyz[3 * i], g.xyz[3 * i + 1],
+              g.xyz[3 * i + 2]);
+    int64_t ne = 0;
+    for (int32_t i = 0; i < g.n; i++)
+      for (int64_t k = g.xadj[i]; k < g.xadj[i + 1]; k++) ne += g.adj[k] > i;
+    fprintf(f, "edges %lld\n", (long long)ne);
+    for (int32_t i = 0; i < g.n; i++)
+      for (int64_t k = g.xadj[i]; k < g.xadj[i + 1]; k++)
+        if (g.adj[k] > i) fprintf(f, "%d %d %.17g\n", i, g.adj[k], g.c[k]);
+    bad = ferror(f) != 0;
+    if (fclose(f) != 0) bad = 1;
+  }
+  bgraph_free(&g);
+  if (bad || rename(tmp, path) != 0) {
+    const int e = errno;
+    remove(tmp);
+    return hr_err_set(err, HR_ERR_IO, "%s: cannot write the graph: %s", path, strerror(e));
+  }
+  return HR_OK;
+}
