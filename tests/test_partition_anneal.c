@@ -1,7 +1,8 @@
 /* test_partition_anneal: the paper's cost Z (eq. (5)) against hand-computed values, and the
  * clustering + simulated annealing partitioner (partition/anneal.c) on a 32x32 grid graph:
  * from width-1 stripes it must come near the quadrants' optimum, from the quadrants it must not
- * get worse, it repeats itself for a seed, and it rejects bad input. */
+ * get worse, it repeats itself for a seed, and it rejects bad input; on a random graph with
+ * planted groups it finds them. */
 #include "partition/partition.h"
 #include "testutil.h"
 #include "xorshift.h"
@@ -189,8 +190,56 @@ static void test_bad_input(test_graph *t) {
   CHECK(hr_partition_anneal(&empty, PARTS, ALPHA, 1, part) == 1, "n = 0 refused");
 }
 
+/* A random graph with planted groups: 4 groups of 64 nodes (weight 1), an edge inside a group
+ * with probability 0.3 and between groups with 0.01 (weight 1). From a random start, annealing
+ * (and its long variant) must find the groups: every group mostly in one part of its own, and Z
+ * within 2% of the planted partition's. */
+#define PL_GROUPS 4
+#define PL_SIZE 64
+#define PL_N (PL_GROUPS * PL_SIZE)
+static void test_planted(void) {
+  static int64_t xadj[PL_N + 1];
+  static int32_t adj[PL_N * PL_N], part[PL_N], planted[PL_N];
+  static double w[PL_N], c[PL_N * PL_N];
+  static uint8_t edge[PL_N][PL_N];
+  for (int u = 0; u < PL_N; u++)
+    for (int v = u + 1; v < PL_N; v++)
+      edge[u][v] = edge[v][u] = rnd_in(0.0, 1.0) < (u / PL_SIZE == v / PL_SIZE ? 0.3 : 0.01);
+  int64_t e = 0;
+  for (int u = 0; u < PL_N; u++) {
+    xadj[u] = e;
+    w[u] = 1.0;
+    planted[u] = u / PL_SIZE;
+    for (int v = 0; v < PL_N; v++)
+      if (edge[u][v]) adj[e] = v, c[e++] = 1.0;
+  }
+  xadj[PL_N] = e;
+  const hr_graph g = {PL_N, xadj, adj, w, c};
+  const double zp = hr_partition_cost(&g, planted, PL_GROUPS, ALPHA, NULL, NULL);
+  for (int run = 0; run < 2; run++) {
+    for (int v = 0; v < PL_N; v++) part[v] = (int32_t)(rnd_in(0.0, PL_GROUPS - 1e-9));
+    const int ok = run == 0 ? hr_partition_anneal(&g, PL_GROUPS, ALPHA, 5, part)
+                            : hr_partition_anneal_effort(&g, PL_GROUPS, ALPHA, 5, 8.0, part);
+    CHECK(ok == 1, "anneal failed");
+    const double z = hr_partition_cost(&g, part, PL_GROUPS, ALPHA, NULL, NULL);
+    CHECK(z <= 1.02 * zp, "%s: Z %g against the planted %g", run ? "long" : "normal", z, zp);
+    /* each group's majority part, distinct for the groups, holding >= 90% of it */
+    int seen[PL_GROUPS] = {0};
+    for (int grp = 0; grp < PL_GROUPS; grp++) {
+      int cnt[PL_GROUPS] = {0}, best = 0;
+      for (int v = grp * PL_SIZE; v < (grp + 1) * PL_SIZE; v++) cnt[part[v]]++;
+      for (int p = 1; p < PL_GROUPS; p++) best = cnt[p] > cnt[best] ? p : best;
+      CHECK(cnt[best] >= 0.9 * PL_SIZE, "group %d: %d of %d in one part", grp, cnt[best],
+            PL_SIZE);
+      CHECK(!seen[best], "two groups share part %d", best);
+      seen[best] = 1;
+    }
+  }
+}
+
 int main(void) {
   static test_graph t;
+  test_planted();
   make_grid(&t);
   test_cost_by_hand();
   test_grid_from_stripes(&t);
