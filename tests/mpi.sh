@@ -2,7 +2,7 @@
 # The distributed solver under mpirun (README "Many processes"): the same answer, bit for bit, as
 # one process, for P = 1, 2, 3, 4, 7 ranks, 1 or 2 threads per rank and random assignments of
 # the elements (subtrees at every depth) to ranks (surfaces.csv, the images, the meshes and the
-# counts of stats.json); a rank that fails in any phase (HRAD_TEST_FAIL) ends the whole run with
+# counts of stats.json), with graph balancing by each method; a rank that fails in any phase (HRAD_TEST_FAIL) ends the whole run with
 # one line, exit status 1, no outputs and no hang; bad input reported once; options not supported
 # yet refused.
 # Runs above 2 ranks are oversubscribed on 2 cores: correctness only, no timing here.
@@ -61,6 +61,16 @@ for seed in $(seq "${MPI_STRESS:-10}"); do
     && same "$t/fref" "$t/f$seed" floor "floor, $np ranks, random assignment $seed" \
     || bad "floor on $np ranks (random:$seed): exit $?"
   rm -rf "$t/f$seed"
+done
+
+# ---------------------------------------------------------------- graph balancing
+# --balance anneal|metis|orb (paper 2.2.5) moves subtrees after initial linking and, with
+# --balance-idle 0, every third iteration: the answer does not change.
+for m in anneal metis orb; do
+  mpi 3 "${q[@]}" --threads 1 --balance "$m" --balance-idle 0 -o "$t/bal-$m" cornell \
+    && same "$t/c1" "$t/bal-$m" cornell "cornell, 3 ranks, --balance $m, rebalanced every 3 iterations" \
+    || bad "cornell --balance $m: exit $?"
+  rm -rf "$t/bal-$m"
 done
 
 # ---------------------------------------------------------------- elements are distributed
