@@ -179,7 +179,8 @@ static hr_status gather_graph(hr_solver *s, bgraph *g, hr_err *err) {
   }
   i = 0;
   for (int64_t k = 0; k < s->nlinks; k++)
-    if (s->links[k].Fu >= 0) ed[i++] = (edge_rec){s->el[s->links[k].r].gid, s->el[s->links[k].s].gid};
+    if (s->links[k].Fu >= 0)
+      ed[i++] = (edge_rec){s->el[s->links[k].r].gid, s->el[s->links[k].s].gid};
   free(recv);
   void *an = NULL, *ae = NULL;
   int64_t nn = 0, ne = 0;

@@ -282,7 +282,7 @@ int32_t hr_elem_ensure(hr_solver *s, uint64_t gid) {
 #define OPEN_M 4
 
 void hr_elem_open(hr_solver *s, int64_t lo, int64_t hi) {
-#pragma omp parallel for schedule(dynamic, 64) if (hi - lo > 256)
+#pragma omp parallel for schedule(dynamic, 64) if (hi - lo > 256) num_threads(s->threads)
   for (int64_t e = lo; e < hi; e++) {
     if (e >= s->scene->nsurfs && !hr_owns(s, e)) continue; /* a ghost: its owner's business */
     /* A child of a wholly open element is wholly open. */

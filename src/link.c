@@ -339,7 +339,7 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
                       n, pairs, s->opt.max_links);
   row *rows = calloc((size_t)n, sizeof *rows);
   if (!rows) return hr_err_set(err, HR_ERR_NOMEM, "out of memory in initial linking");
-#pragma omp parallel for schedule(dynamic, 4) if (n > 16)
+#pragma omp parallel for schedule(dynamic, 4) if (n > 16) num_threads(s->threads)
   for (int i = 0; i < n; i++) init_row(s, i, &rows[i]);
   int64_t nl = 0;
   int failed = 0;
@@ -410,7 +410,8 @@ static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uin
     int64_t k = 0;
     for (int64_t i = 0; i < ncur; i++)
       if (dec[i] != KEEP && cur[i].ncand == NO_LIST) which[k++] = i;
-#pragma omp parallel for schedule(dynamic, 16) reduction(| : failed) if (nb > 64)
+#pragma omp parallel for schedule(dynamic, 16) reduction(| : failed) \
+    if (nb > 64) num_threads(s->threads)
     for (int64_t k2 = 0; k2 < nb; k2++) {
       const hr_link *l = &cur[which[k2]];
       const hr_elem *r = &s->el[l->r], *j = &s->el[l->s];
@@ -942,7 +943,8 @@ static int64_t decide_all(hr_solver *s, double bf_e, uint8_t *dec, float *bup) {
      * margin covers the rounding of the products, so the bound never keeps a link that the
      * exact test would split. */
     const double margin = bf_e * (1 - 1e-9);
-#pragma omp parallel for schedule(dynamic, 256) reduction(+ : nsplit0) if (s->nsorted > PAR_MIN)
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : nsplit0) \
+    if (s->nsorted > PAR_MIN) num_threads(s->threads)
     for (int64_t e = 0; e < s->nrstart; e++) {
       const double rm = s->rho_max[e], lim = margin * s->bref[e];
       for (int64_t k = s->rstart[e]; k < s->rstart[e + 1]; k++) {
@@ -952,7 +954,8 @@ static int64_t decide_all(hr_solver *s, double bf_e, uint8_t *dec, float *bup) {
     }
     lo = s->nsorted;
   }
-#pragma omp parallel for schedule(static) reduction(+ : nsplit0) if (s->nlinks - lo > PAR_MIN)
+#pragma omp parallel for schedule(static) reduction(+ : nsplit0) \
+    if (s->nlinks - lo > PAR_MIN) num_threads(s->threads)
   for (int64_t i = lo; i < s->nlinks; i++) {
     dec[i] = decide(s, &s->links[i], bf_e);
     nsplit0 += dec[i] != KEEP;
@@ -1025,7 +1028,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       uint8_t *d2 = realloc(dec, (size_t)(ncur > 0 ? ncur : 1));
       if (d2) {
         dec = d2;
-#pragma omp parallel for schedule(static) if (ncur > PAR_MIN)
+#pragma omp parallel for schedule(static) if (ncur > PAR_MIN) num_threads(s->threads)
         for (int64_t i = 0; i < ncur; i++) dec[i] = decide(s, &cur[i], bf_e);
       } else {
         st = HR_ERR_NOMEM;
@@ -1066,7 +1069,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       else st = HR_ERR_NOMEM;
     }
     if (st == HR_OK) {
-#pragma omp parallel for schedule(static) if (ncur > PAR_MIN)
+#pragma omp parallel for schedule(static) if (ncur > PAR_MIN) num_threads(s->threads)
       for (int64_t i = 0; i < ncur; i++)
         if (dec[i] == KEEP) keep[nkeep + slot[i]] = cur[i];
       nkeep += nk;
@@ -1094,7 +1097,8 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
           coff[slot[i]] = acc;
           acc += 4 * (int64_t)cur[i].ncand;
         }
-#pragma omp parallel for schedule(dynamic, 64) reduction(+ : rays) if (nsplit > 16)
+#pragma omp parallel for schedule(dynamic, 64) reduction(+ : rays) \
+    if (nsplit > 16) num_threads(s->threads)
       for (int64_t i = 0; i < ncur; i++) {
         if (dec[i] == KEEP) continue;
         const hr_link *pl = &cur[i];
@@ -1194,7 +1198,7 @@ static int sort_by_source(const hr_solver *s, int64_t nrecv, const int64_t *star
   const int64_t n = start[nrecv];
   gid_key *k = malloc((size_t)(n > 0 ? n : 1) * sizeof *k);
   if (!k) return 0;
-#pragma omp parallel for schedule(dynamic, 256) if (n > PAR_MIN)
+#pragma omp parallel for schedule(dynamic, 256) if (n > PAR_MIN) num_threads(s->threads)
   for (int64_t e = 0; e < nrecv; e++) {
     const int64_t a = start[e], m = start[e + 1] - a;
     if (m < 2) continue;
@@ -1279,7 +1283,7 @@ hr_status hr_link_sort(hr_solver *s) {
     noff[k] = o;
     o += nc > 0 ? nc : 0;
   }
-#pragma omp parallel for schedule(static) if (n > PAR_MIN)
+#pragma omp parallel for schedule(static) if (n > PAR_MIN) num_threads(s->threads)
   for (int64_t k = 0; k < n; k++) {
     hr_link l = s->links[order[k]];
     if (l.ncand > 0) memcpy(np + noff[k], s->pool + l.cand_off, (size_t)l.ncand * sizeof *np);
@@ -1298,7 +1302,7 @@ hr_status hr_link_sort(hr_solver *s) {
     free(np);
     return HR_ERR_NOMEM;
   }
-#pragma omp parallel for schedule(static) if (n > PAR_MIN)
+#pragma omp parallel for schedule(static) if (n > PAR_MIN) num_threads(s->threads)
   for (int64_t k = 0; k < n; k++) {
     double f = out[k].Fu >= 0 ? (out[k].dF > out[k].dS ? out[k].dF : out[k].dS) : 0;
     float fu = (float)f;

@@ -116,7 +116,8 @@ static double pushpull(hr_solver *s, int32_t idx, const double down[5], double b
 static double push_pull_local(hr_solver *s) {
   double maxc = 0;
   int n = s->scene->nsurfs;
-#pragma omp parallel for schedule(dynamic, 8) reduction(max : maxc) if (s->nel > PAR_MIN)
+#pragma omp parallel for schedule(dynamic, 8) reduction(max : maxc) \
+    if (s->nel > PAR_MIN) num_threads(s->threads)
   for (int i = 0; i < n; i++) {
     double zero[5] = {0, 0, 0, 0, 0}, b[3], range[2];
     double d = pushpull(s, i, zero, b, range);

@@ -182,7 +182,7 @@ static inline void gather_link(const hr_solver *s, const hr_link *l, double *g0,
 
 /* do_link for every link, grouped by receiver: G_i = sum_j F_ij B_j (previous B). */
 static void gather(hr_solver *s) {
-#pragma omp parallel for schedule(dynamic, 256) if (s->nlinks > PAR_MIN)
+#pragma omp parallel for schedule(dynamic, 256) if (s->nlinks > PAR_MIN) num_threads(s->threads)
   for (int64_t e = 0; e < s->nel; e++) {
     double g0 = 0, g1 = 0, g2 = 0, gu = 0, gf = 0;
     /* The sorted links and the extras, each in source gid order, merged: the sum runs in the
@@ -485,7 +485,8 @@ hr_status hr_solver_set_balance(hr_solver *s, int method, double alpha, double i
 
 hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
   hr_status st;
-  omp_set_num_threads(s->threads);
+  /* threads: every parallel loop says num_threads(s->threads); the process-wide OpenMP
+   * setting is the program's to choose, not the library's */
   s->t_start = hr_now() - s->t.total; /* a resumed run goes on counting */
   if ((st = prepare(s, err)) != HR_OK) return st;
   if (!s->started) {
