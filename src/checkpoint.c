@@ -485,23 +485,7 @@ hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err) {
   hr_solver_sync_counts(s);
   /* every rank built every element from the file: it keeps its own, the sources of its links,
    * their children, and what the tree needs above them; its ghosts of sources subscribe */
-  uint8_t *keep = calloc((size_t)s->nel + 1, 1);
-  if (keep) {
-    for (int64_t e = 0; e < s->nel; e++) keep[e] |= e < s->scene->nsurfs || hr_owns(s, e);
-    for (int64_t i = 0; i < s->nlinks; i++) keep[s->links[i].s] = 1;
-    for (int64_t e = 0; e < s->nel; e++) /* children of own elements and of sources */
-      if (keep[e] && s->el[e].child >= 0)
-        for (int k = 0; k < 4; k++) keep[s->el[e].child + k] |= 2;
-    for (int64_t e = s->nel - 1; e >= 0; e--)
-      if (keep[e] && s->el[e].parent >= 0) keep[s->el[e].parent] |= 4;
-    for (int64_t e = 0; e < s->nel; e++) { /* whole sibling groups */
-      const int32_t c = s->el[e].child;
-      if (c >= 0 && (keep[c] | keep[c + 1] | keep[c + 2] | keep[c + 3]))
-        for (int k = 0; k < 4; k++) keep[c + k] |= 8;
-    }
-    hr_elem_compact(s, keep);
-  }
-  free(keep);
+  hr_elem_prune(s);
   return hr_link_subscribe(s, err);
 }
 

@@ -826,6 +826,7 @@ hr_status hr_link_migrate(hr_solver *s, hr_err *err) {
   if (st != HR_OK) return st;
   s->nsubs = 0;
   memset(s->esub, 0, (size_t)s->nel);
+  hr_elem_prune(s); /* what this rank held for its old elements */
   return hr_link_subscribe(s, err);
 }
 

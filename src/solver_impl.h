@@ -183,6 +183,10 @@ int32_t hr_elem_find(const hr_solver *s, uint64_t gid);
 int32_t hr_elem_ensure(hr_solver *s, uint64_t gid);
 /* Drops the elements with keep[e] == 0 (see elem.c for what 'keep' must satisfy). */
 void hr_elem_compact(hr_solver *s, const uint8_t *keep);
+/* Distributed runs: drops the ghosts this rank no longer needs (it keeps the roots, its own
+ * elements, the sources of its links, their children, and what holds the tree together).
+ * Subscriptions must be empty (the caller subscribes afresh). */
+void hr_elem_prune(hr_solver *s);
 /* Estimates the open fraction (hr_vf_open) of elements [lo, hi), in parallel; needs s->vis. */
 void hr_elem_open(hr_solver *s, int64_t lo, int64_t hi);
 
