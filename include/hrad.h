@@ -319,6 +319,7 @@ typedef struct hr_rank_stats {
   int64_t ghosts;        /* other ranks' elements it holds a copy of */
   double elem_mb, link_mb; /* memory of its elements (own and ghosts) and of its links */
   int64_t msgs, msg_bytes; /* point-to-point message batches and bytes it sent */
+  int64_t balancings, migrations; /* graph balancings, and those that moved elements */
   int64_t rays;          /* rays it cast */
   int64_t mpi_calls;     /* collectives it took part in */
   int64_t mpi_bytes;     /* bytes it sent in them */

@@ -20,6 +20,9 @@
 #include <stdlib.h>
 #include <string.h>
 
+/* A new partition is taken only if it lowers Z below this fraction of the current one's. */
+#define KEEP_GAIN 0.95
+
 /* What each rank sends rank 0 about one own element. */
 typedef struct node_rec {
   uint64_t gid, parent; /* parent gid, 0 for a root */
@@ -281,12 +284,26 @@ hr_status hr_solver_balance(hr_solver *s, int method, hr_err *err) {
   if (st == HR_OK && s->rank == 0) {
     gids = malloc((size_t)(g.n + 1) * sizeof *gids);
     ranks = malloc((size_t)(g.n + 1) * sizeof *ranks);
-    if (!gids || !ranks) hr_dist_abort(s->dist, 1);
-    m = subtree_map(&g, part, gids, ranks);
+    int32_t *now = malloc((size_t)(g.n + 1) * sizeof *now);
+    if (!gids || !ranks || !now) hr_dist_abort(s->dist, 1);
+    /* a partition that does not lower Z by KEEP_GAIN is not worth moving the graph */
+    for (int32_t i = 0; i < g.n; i++) now[i] = hr_owner_of(s, g.gid[i]);
+    const hr_graph v = view(&g);
+    const double z_now = hr_partition_cost(&v, now, P, s->bal_alpha, NULL, NULL);
+    const double z_new = hr_partition_cost(&v, part, P, s->bal_alpha, NULL, NULL);
+    m = z_new < KEEP_GAIN * z_now ? subtree_map(&g, part, gids, ranks) : -1;
+    free(now);
   }
   free(part);
   if (st == HR_OK) {
     hr_dist_bcast(s->dist, &m, sizeof m);
+    if (m < 0) { /* kept */
+      free(gids), free(ranks);
+      bgraph_free(&g);
+      s->nbalance++;
+      s->t.balance += hr_now() - t0;
+      return HR_OK;
+    }
     if (s->rank != 0) {
       gids = malloc((size_t)(m + 1) * sizeof *gids);
       ranks = malloc((size_t)(m + 1) * sizeof *ranks);
@@ -299,6 +316,7 @@ hr_status hr_solver_balance(hr_solver *s, int method, hr_err *err) {
   free(gids), free(ranks);
   bgraph_free(&g);
   s->nbalance++;
+  s->nmoved++;
   s->t.balance += hr_now() - t0;
   return st;
 }

@@ -144,8 +144,9 @@ struct hr_solver {
   /* graph balancing (balance.c): method, alpha of eq. (5), idle threshold, balancings done */
   int bal_method;
   double bal_alpha, bal_idle;
-  int64_t nbalance;
+  int64_t nbalance, nmoved; /* balancings done, and those that moved elements */
   int bal_last;       /* the iteration after which it last balanced */
+  int64_t bal_links;  /* the link count (all ranks) then */
   double iter_busy;   /* this rank's busy seconds in the last iteration (outside MPI) */
   uint64_t migrate_seed; /* test hook HRAD_TEST_MIGRATE=SEED: new random owners every iteration */
   /* Test hook (HRAD_TEST_FAIL=RANK:PHASE:ITER, read by hr_solver_set_dist): rank 'fail_rank'

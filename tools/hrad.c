@@ -1570,6 +1570,9 @@ static void print_ranks(const hr_rank_stats *r, int n) {
   }
   fprintf(stderr, "element+link memory: max %.2f MB a rank, %.2f x 1/P of the graph (%.2f MB)\n",
           mem_max, graph > 0 ? mem_max / (graph / n) : 1, graph);
+  if (r[0].balancings > 0)
+    fprintf(stderr, "graph balancing: %lld times, %lld of them moved elements\n",
+            (long long)r[0].balancings, (long long)r[0].migrations);
   /* per phase: busy and MPI (idle included) seconds, min/mean/max over the ranks */
   static const char *const ph[4] = {"init graph", "refine", "gather", "push-pull"};
   fprintf(stderr, "phase         busy min   mean    max    mpi min   mean    max\n");
