@@ -62,6 +62,9 @@ typedef struct hr_material {
   char *name;
   double rho[3];  /* diffuse reflectance, RGB, 0..1 */
   double emit[3]; /* emitted radiosity E, RGB, W/m^2 */
+  int base;       /* the input material this one was made from: its own index for a material
+                     of the input; another material's for a per-polygon variant (a textured
+                     polygon's mean reflectance, hr_scene_add_variant), which shares its name */
 } hr_material;
 
 /* A surface is a planar triangle or convex planar quad (the paper's "surface"/"blocker").
@@ -104,6 +107,14 @@ typedef struct hr_scene {
   int ninputs, cap_inputs;
   int has_camera;
   hr_camera camera;
+  /* Objects (OBJ `o`/`g`, the nodes of a glTF, FBX, ...), in order of first use. Every kept
+   * polygon belongs to one: the current object when it was added (hr_scene_begin_object), or,
+   * before any, a default object named like the scene. */
+  char **objects;
+  int nobjects, cap_objects;
+  int cur_object;      /* object of polygons added now; -1: the default object */
+  int *poly_object;    /* [npolys] */
+  int cap_poly_object;
 } hr_scene;
 
 hr_status hr_scene_create(const char *name, hr_scene **out);
@@ -115,8 +126,31 @@ void hr_scene_destroy(hr_scene **s);
  * rho is in [0, 1] and every emit in [0, HR_EMIT_MAX]. */
 hr_status hr_scene_add_material(hr_scene *s, const char *name, const double rho[3],
                                 const double emit[3], int *idx);
-/* Finds a material by exact name; returns its index or -1. */
+/* Finds an input material (not a variant) by exact name; returns its index or -1. */
 int hr_scene_find_material(const hr_scene *s, const char *name);
+/* Adds a variant of input material 'base': the same name and emission, reflectance 'rho' (in
+ * [0, 1], HR_ERR_INVALID otherwise). Loaders give a textured polygon one (the solver takes one
+ * reflectance per surface); writers and hr_scene_set_emit treat it as its base. */
+hr_status hr_scene_add_variant(hr_scene *s, int base, const double rho[3], int *idx);
+/* Number of input materials (variants not counted) and the index of the k-th (k in
+ * 0..count-1, input order), or -1. */
+int hr_scene_material_count(const hr_scene *s);
+int hr_scene_material_at(const hr_scene *s, int k);
+
+/* Makes polygons added from now on belong to object 'name' (found by exact name, or added).
+ * HR_ERR_NOMEM, or HR_ERR_INVALID for a NULL name. */
+hr_status hr_scene_begin_object(hr_scene *s, const char *name);
+/* Objects: their number, the name of object 'obj' (NULL when out of range), the object of kept
+ * polygon 'poly' (-1 when out of range), and its material (the input material of its first
+ * surface, -1 when out of range). */
+int hr_scene_object_count(const hr_scene *s);
+const char *hr_scene_object_name(const hr_scene *s, int obj);
+int hr_scene_poly_object(const hr_scene *s, int poly);
+int hr_scene_poly_material(const hr_scene *s, int poly);
+/* Multiplies every coordinate (and the camera) by 'f' > 0: a scene in millimetres becomes one
+ * in metres with f = 0.001. Emission (W/m^2) is per area and unchanged. HR_ERR_INVALID for a
+ * bad factor or coordinates that would exceed HR_COORD_MAX. */
+hr_status hr_scene_scale(hr_scene *s, double f);
 
 /* Result of adding a polygon. */
 typedef enum {
@@ -162,6 +196,22 @@ hr_status hr_scene_parse_obj(const char *buf, size_t len, const char *path, cons
                              hr_scene **out, hr_err *err);
 /* Reads the file at 'path' and parses it. */
 hr_status hr_scene_load_obj(const char *path, const hr_log *log, hr_scene **out, hr_err *err);
+/* Reads a scene through assimp (import.c): glTF 2.0 (.gltf, .glb), PLY, 3DS, FBX, Collada
+ * (.dae) and STL. Polygons stay as stored (no triangulation; identical vertices joined), in world
+ * space (node transforms applied); every node that holds meshes becomes an object (its name, or
+ * the mesh's), every material a scene material: reflectance from the diffuse or base colour
+ * (times the mean of its diffuse texture over each polygon's UV footprint, PNG or JPEG, external
+ * or embedded: a per-polygon variant), emission from the emissive colour (times
+ * KHR_materials_emissive_strength). Errors are "PATH: what" (assimp's message for files it
+ * cannot read); warnings (degenerate polygons, clamped colours, unreadable textures) go to 'log'.
+ * Nothing is kept on error. */
+hr_status hr_scene_import(const char *path, const hr_log *log, hr_scene **out, hr_err *err);
+/* Loads 'path' by its extension (case-insensitive): .obj with hr_scene_load_obj, the formats of
+ * hr_scene_import with it; any other extension is HR_ERR_INVALID ("PATH: unknown scene format
+ * '.X' (...)"), so that no file is read as a format it is not. */
+hr_status hr_scene_load(const char *path, const hr_log *log, hr_scene **out, hr_err *err);
+/* 1 if hr_scene_load takes a file named 'path' (by its extension). */
+int hr_scene_format_known(const char *path);
 /* Like hr_scene_parse_obj, but never touches the disk: every `mtllib` statement reads the MTL
  * text 'mtl' ('mlen' bytes, parsed once per statement) as if it were the named file (messages
  * name that file, resolved against 'path' as usual). 'mtl' NULL (mlen 0) means no library can be
@@ -174,8 +224,8 @@ hr_status hr_scene_parse_obj_mtl(const char *obj, size_t olen, const char *mtl, 
 hr_status hr_scene_builtin(const char *name, hr_scene **out, hr_err *err);
 /* NULL-terminated list of built-in scene names. */
 const char *const *hr_scene_builtin_names(void);
-/* Makes material 'name' emit 'rgb'; HR_ERR_INVALID if no such material or a value is not in
- * [0, HR_EMIT_MAX]. */
+/* Makes material 'name' (and its variants) emit 'rgb'; HR_ERR_INVALID if no such material or a
+ * value is not in [0, HR_EMIT_MAX]. */
 hr_status hr_scene_set_emit(hr_scene *s, const char *name, const double rgb[3], hr_err *err);
 
 /* ---------------------------------------------------------------- solver (solve.c) */

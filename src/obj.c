@@ -13,8 +13,13 @@
  * CRLF line ends, a leading UTF-8 byte order mark, and a backslash at the end of a line joining it
  * with the next. Material and file names are the rest of the line, trimmed, so they may contain
  * spaces and '#'. On numeric statements a '#' token starts a comment.
- * `g o s vt vn vp l p` and the free-form curve/surface statements are ignored silently; other
+ * `s vt vn vp l p` and the free-form curve/surface statements are ignored silently; other
  * unknown statements are ignored with one warning per keyword (at most 32 different keywords).
+ * Objects: `o NAME` makes the following faces belong to object NAME (the rest of the line,
+ * trimmed); so does `g NAME` while no `o` has been read (files of exporters that write only
+ * groups), after which groups are ignored (Blender writes `o` per object and `g` per material
+ * group). Faces before any get the default object, named like the scene; `o`/`g` without a name
+ * are ignored. A name used again continues its object.
  *
  * Materials and fallbacks (deliberate, so that incomplete downloads still load):
  *  - every `newmtl` of every MTL library read becomes a scene material, used or not; a name
@@ -100,6 +105,8 @@ typedef struct obj_ctx {
   hr_vec3 *face; /* scratch: the current face's vertices */
   size_t cap_face;
   int cur_mat;  /* material of following faces; -1 = none chosen yet ("default") */
+  int seen_o;   /* an `o` statement was read: `g` no longer names objects */
+  int warned_map; /* map_Kd already reported */
   char *warned; /* unknown keywords already reported, each NUL-terminated */
   size_t warned_len, warned_cap;
   int nwarned;
@@ -418,6 +425,12 @@ static hr_status parse_mtl(obj_ctx *c, const char *mpath, char *buf, size_t len)
         else
           c->s->mats[cur].emit[k] = rgb[k];
       }
+    } else if (kl == 6 && memcmp(p, "map_Kd", 6) == 0 && !c->warned_map) {
+      c->warned_map = 1;
+      hr_log_warn(c->log,
+                  "%s:%ld: texture map_Kd '%.60s' ignored: OBJ reflectance is Kd alone (convert "
+                  "to glTF for textures)",
+                  mpath, line, rest);
     }
     /* every other key (Ka, Ks, Ns, d, illum, map_*, ...) is irrelevant to diffuse radiosity */
   }
@@ -759,11 +772,21 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
 
 /* Statements that carry nothing radiosity needs and are skipped without a warning. */
 static const char *const IGNORED[] = {
-    "g",        "o",        "s",    "vt",     "vn",     "vp",         "l",         "p",
+    "s",        "vt",     "vn",     "vp",         "l",         "p",
     "cstype",   "deg",      "bmat", "step",   "curv",   "curv2",      "surf",      "parm",
     "trim",     "hole",     "scrv", "sp",     "end",    "con",        "mg",        "bevel",
     "c_interp", "d_interp", "lod",  "usemap", "maplib", "shadow_obj", "trace_obj", "ctech",
     "stech",    "call",     "csh",  NULL};
+
+/* Handles `o NAME` and `g NAME` (see the file comment). */
+static hr_status do_object(obj_ctx *c, long line, char kw, const char *name) {
+  if (kw == 'o') c->seen_o = 1;
+  else if (c->seen_o) return HR_OK;
+  if (*name == '\0') return HR_OK;
+  if (hr_scene_begin_object(c->s, name) != HR_OK)
+    return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
+  return HR_OK;
+}
 
 /* Warns about unknown keyword 'kw' (length 'kl') once per keyword, for at most
  * MAX_WARNED_KEYWORDS different keywords. */
@@ -808,6 +831,8 @@ static hr_status parse_obj_text(obj_ctx *c, char *buf, size_t len) {
       continue;
     else if (kl == 6 && memcmp(p, "usemtl", 6) == 0)
       st = do_usemtl(c, line, rest);
+    else if (kl == 1 && (p[0] == 'o' || p[0] == 'g'))
+      st = do_object(c, line, p[0], rest);
     else if (kl == 6 && memcmp(p, "mtllib", 6) == 0)
       st = do_mtllib(c, line, rest);
     else

@@ -40,6 +40,7 @@ hr_status hr_scene_create(const char *name, hr_scene **out) {
     free(s);
     return HR_ERR_NOMEM;
   }
+  s->cur_object = -1;
   *out = s;
   return HR_OK;
 }
@@ -52,6 +53,9 @@ void hr_scene_destroy(hr_scene **ps) {
   free(s->surfs);
   free(s->poly_area);
   free(s->inputs);
+  for (int i = 0; i < s->nobjects; i++) free(s->objects[i]);
+  free(s->objects);
+  free(s->poly_object);
   free(s->name);
   free(s);
   *ps = NULL;
@@ -82,15 +86,104 @@ hr_status hr_scene_add_material(hr_scene *s, const char *name, const double rho[
     m->rho[c] = rho[c];
     m->emit[c] = emit[c];
   }
+  m->base = s->nmats;
   if (idx) *idx = s->nmats;
   s->nmats++;
   return HR_OK;
 }
 
+hr_status hr_scene_add_variant(hr_scene *s, int base, const double rho[3], int *idx) {
+  if (base < 0 || base >= s->nmats) return HR_ERR_INVALID;
+  base = s->mats[base].base;
+  int k;
+  hr_status st = hr_scene_add_material(s, s->mats[base].name, rho, s->mats[base].emit, &k);
+  if (st != HR_OK) return st;
+  s->mats[k].base = base;
+  if (idx) *idx = k;
+  return HR_OK;
+}
+
+int hr_scene_material_count(const hr_scene *s) {
+  int n = 0;
+  for (int i = 0; i < s->nmats; i++) n += s->mats[i].base == i;
+  return n;
+}
+
+int hr_scene_material_at(const hr_scene *s, int k) {
+  for (int i = 0; i < s->nmats; i++)
+    if (s->mats[i].base == i && k-- == 0) return i;
+  return -1;
+}
+
 int hr_scene_find_material(const hr_scene *s, const char *name) {
   for (int i = 0; i < s->nmats; i++)
-    if (strcmp(s->mats[i].name, name) == 0) return i;
+    if (s->mats[i].base == i && strcmp(s->mats[i].name, name) == 0) return i;
   return -1;
+}
+
+/* ---------------------------------------------------------------- objects */
+
+/* Index of object 'name', added when missing; -1 when out of memory. */
+static int find_or_add_object(hr_scene *s, const char *name) {
+  for (int i = 0; i < s->nobjects; i++)
+    if (strcmp(s->objects[i], name) == 0) return i;
+  if (!grow((void **)&s->objects, &s->cap_objects, s->nobjects + 1, sizeof *s->objects))
+    return -1;
+  if (!(s->objects[s->nobjects] = strdup(name))) return -1;
+  return s->nobjects++;
+}
+
+hr_status hr_scene_begin_object(hr_scene *s, const char *name) {
+  if (!s || !name) return HR_ERR_INVALID;
+  int o = find_or_add_object(s, name);
+  if (o < 0) return HR_ERR_NOMEM;
+  s->cur_object = o;
+  return HR_OK;
+}
+
+int hr_scene_object_count(const hr_scene *s) { return s->nobjects; }
+
+const char *hr_scene_object_name(const hr_scene *s, int obj) {
+  return obj >= 0 && obj < s->nobjects ? s->objects[obj] : NULL;
+}
+
+int hr_scene_poly_object(const hr_scene *s, int poly) {
+  return poly >= 0 && poly < s->npolys && s->poly_object ? s->poly_object[poly] : -1;
+}
+
+int hr_scene_poly_material(const hr_scene *s, int poly) {
+  if (poly < 0 || poly >= s->npolys) return -1;
+  for (int i = 0; i < s->nsurfs; i++) /* a polygon's surfaces are consecutive and in order */
+    if (s->surfs[i].poly == poly) return s->mats[s->surfs[i].material].base;
+  return -1;
+}
+
+/* Records the object of the polygon just kept (the last one): 0 when out of memory. */
+static int record_object(hr_scene *s) {
+  if (s->cur_object < 0 && (s->cur_object = find_or_add_object(s, s->name)) < 0) return 0;
+  if (!grow((void **)&s->poly_object, &s->cap_poly_object, s->npolys, sizeof *s->poly_object))
+    return 0;
+  s->poly_object[s->npolys - 1] = s->cur_object;
+  return 1;
+}
+
+hr_status hr_scene_scale(hr_scene *s, double f) {
+  if (!(f > 0) || !isfinite(f)) return HR_ERR_INVALID;
+  for (int i = 0; i < s->nsurfs; i++)
+    for (int k = 0; k < s->surfs[i].nverts; k++) {
+      hr_vec3 p = v3_scale(s->surfs[i].v[k], f);
+      if (!(fabs(p.x) <= HR_COORD_MAX && fabs(p.y) <= HR_COORD_MAX && fabs(p.z) <= HR_COORD_MAX))
+        return HR_ERR_INVALID;
+    }
+  for (int i = 0; i < s->nsurfs; i++) {
+    hr_surface *sf = &s->surfs[i];
+    for (int k = 0; k < sf->nverts; k++) sf->v[k] = v3_scale(sf->v[k], f);
+    sf->area *= f * f;
+  }
+  for (int p = 0; p < s->npolys; p++) s->poly_area[p] *= f * f;
+  s->camera.eye = v3_scale(s->camera.eye, f);
+  s->camera.at = v3_scale(s->camera.at, f);
+  return HR_OK;
 }
 
 hr_status hr_scene_set_emit(hr_scene *s, const char *name, const double rgb[3], hr_err *err) {
@@ -101,7 +194,9 @@ hr_status hr_scene_set_emit(hr_scene *s, const char *name, const double rgb[3], 
       return hr_err_set(err, HR_ERR_INVALID,
                         "emission of '%s' must be in [0, 1e30] (got %g, %g, %g)", name, rgb[0],
                         rgb[1], rgb[2]);
-  for (int c = 0; c < 3; c++) s->mats[m].emit[c] = rgb[c];
+  for (int i = 0; i < s->nmats; i++)
+    if (s->mats[i].base == m)
+      for (int c = 0; c < 3; c++) s->mats[i].emit[c] = rgb[c];
   return HR_OK;
 }
 
@@ -504,6 +599,7 @@ hr_status hr_scene_add_polygon(hr_scene *s, const hr_vec3 *v, int n, int materia
   hr_status st = add_polygon(s, v, n, material, res);
   if (st != HR_OK) return st;
   if (*res == HR_POLY_NONPLANAR || *res == HR_POLY_NOT_SIMPLE) return HR_OK; /* caller errs */
+  if (*res == HR_POLY_ADDED && !record_object(s)) return HR_ERR_NOMEM;
   int ok = *res == HR_POLY_ADDED ? push_input(s, s->npolys - 1, HR_INPUT_SOLVED)
                                  : push_input(s, -1, HR_INPUT_DEGENERATE);
   return ok ? HR_OK : HR_ERR_NOMEM;

@@ -1041,6 +1041,44 @@ static void test_conference(void) {
   hr_scene_destroy(&s);
 }
 
+/* Objects: faces before any name go to the default object (the scene's name); `g` names objects
+ * until the first `o`, then only `o` does; a name used again continues its object. map_Kd warns
+ * once. */
+static void test_objects(void) {
+  const char *obj = "mtllib m.mtl\n"
+                    "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 0 1\nv 1 0 1\n"
+                    "f 1 2 3\n"          /* poly 0: default object */
+                    "g wall\nf 1 3 4\n" /* poly 1: wall */
+                    "o lamp\nf 1 2 5\n" /* poly 2: lamp */
+                    "g ignored\nf 2 6 5\n" /* poly 3: still lamp */
+                    "o wall\nf 1 5 4\n"; /* poly 4: wall again */
+  const char *mtl = "newmtl a\nKd 0.5 0.5 0.5\nmap_Kd a.png\nnewmtl b\nmap_Kd b.png\n";
+  logcap cap = {0};
+  hr_log log = {cap_fn, &cap};
+  hr_err err = {{0}};
+  hr_scene *s = NULL;
+  hr_status st = hr_scene_parse_obj_mtl(obj, strlen(obj), mtl, strlen(mtl), "dir/objs.obj", &log,
+                                        &s, &err);
+  CHECK(st == HR_OK, "status %d: %s", st, err.msg);
+  if (st != HR_OK) return;
+  CHECK(hr_scene_object_count(s) == 3, "objects %d", hr_scene_object_count(s));
+  const char *want[3] = {"objs", "wall", "lamp"};
+  for (int i = 0; i < 3 && i < hr_scene_object_count(s); i++)
+    CHECK(strcmp(hr_scene_object_name(s, i), want[i]) == 0, "object %d is '%s'", i,
+          hr_scene_object_name(s, i));
+  const int poly_obj[5] = {0, 1, 2, 2, 1};
+  CHECK(s->npolys == 5, "npolys %d", s->npolys);
+  for (int p = 0; p < 5 && p < s->npolys; p++)
+    CHECK(hr_scene_poly_object(s, p) == poly_obj[p], "poly %d in object %d, want %d", p,
+          hr_scene_poly_object(s, p), poly_obj[p]);
+  CHECK(hr_scene_poly_object(s, 5) == -1 && hr_scene_object_name(s, 3) == NULL, "out of range");
+  CHECK(count_msgs(&cap, "map_Kd 'a.png' ignored") == 1 && count_msgs(&cap, "map_Kd") == 1,
+        "map_Kd warnings: %d", count_msgs(&cap, "map_Kd"));
+  CHECK(hr_scene_material_count(s) == 3 && hr_scene_poly_material(s, 0) >= 0,
+        "materials %d", hr_scene_material_count(s));
+  hr_scene_destroy(&s);
+}
+
 int main(void) {
   snprintf(tmpdir, sizeof tmpdir, "%s/hrad_test_obj_XXXXXX",
            getenv("TMPDIR") ? getenv("TMPDIR") : "/tmp");
@@ -1059,6 +1097,7 @@ int main(void) {
   test_duplicates();
   test_range();
   test_parse_obj_mtl();
+  test_objects();
   remove_tmpdir();
   if (shared_missing()) {
     printf("shared scenes: skipped (%s/scenes missing)\n", HR_SHARED_DIR);
