@@ -4,7 +4,7 @@ set -euo pipefail
 here=$(cd "$(dirname "$0")/.." && pwd)
 pkgs=(build-essential cmake pkg-config libembree-dev libtbb-dev libpng-dev gnuplot-nox
       valgrind chromium imagemagick assimp-testmodels libopenmpi-dev openmpi-bin
-      libmetis-dev)
+      libmetis-dev libassimp-dev libjpeg62-turbo-dev)
 # `setup.sh --clang` (make fuzz, make test-ubsan): clang with libFuzzer and its OpenMP runtime.
 [ "${1:-}" = --clang ] && pkgs+=(clang libclang-rt-dev libomp-dev)
 # Node.js: any installed node with npm will do (nodesource's nodejs bundles npm and conflicts

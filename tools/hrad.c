@@ -66,6 +66,10 @@
 #define MARKER ".hrad-staging"      /* in a staging directory until its commit */
 #define SNAP_TMP ".hrad-snap-"      /* in DIR: a snapshot being linked into place */
 
+/* --outputs: the files of a run that can be chosen */
+enum { OUT_CSV = 1, OUT_JSON = 2, OUT_PNG = 4, OUT_PLY = 8, OUT_GLB = 16, OUT_VIEWER = 32 };
+static const char *const OUT_NAMES[] = {"csv", "json", "png", "ply", "glb", "viewer", NULL};
+
 typedef struct names {
   char **v;
   int n, cap;
@@ -100,6 +104,9 @@ typedef struct cli {
   int64_t verify_paths; /* --verify N: path-traced reference per polygon (0 = off) */
   int verify_spp;       /* --verify-image SPP: path-traced reference image (0 = off) */
   int viewer;           /* three.js is installed: write viewer.html */
+  unsigned outputs;     /* --outputs: OUT_* bits of the files to write */
+  double scale;         /* --scale S: coordinates times S (1: as read) */
+  const char *list_mats; /* --list-materials FILE: print its material names and exit */
   FILE *rep;            /* the --verify reports, shown on stderr once the set is committed (a
                            failed run prints only its one-line error) */
   char *rep_buf;
@@ -646,6 +653,23 @@ static void parse_emit(cli *c, const char *v) {
   c->nemit++;
 }
 
+/* --outputs LIST: comma-separated names of OUT_NAMES; anything else is a usage error. */
+static void parse_outputs(cli *c, const char *v) {
+  c->outputs = 0;
+  for (const char *p = v;;) {
+    size_t n = strcspn(p, ",");
+    int k = 0;
+    while (OUT_NAMES[k] && !(strlen(OUT_NAMES[k]) == n && !strncmp(OUT_NAMES[k], p, n))) k++;
+    if (!OUT_NAMES[k])
+      die_usage("--outputs: unknown output '%.*s' in '%s' (choose from csv, json, png, ply, glb, "
+                "viewer)",
+                (int)n, p, v);
+    c->outputs |= 1u << k;
+    if (!p[n]) break;
+    p += n + 1;
+  }
+}
+
 /* One side of --size: the decimal digits between 'a' and 'b' (-1 if there are none or anything
  * else; LONG_MAX if too many). */
 static long parse_side(const char *a, const char *b) {
@@ -706,6 +730,8 @@ static void parse_args(cli *c, int argc, char **argv) {
   c->ckpt_every = CKPT_EVERY;
   c->balance_random = 1, c->balance_seed = 1;
   c->balance_method = HR_BALANCE_NONE, c->balance_alpha = 0.5, c->balance_idle = 0.1;
+  c->outputs = OUT_CSV | OUT_JSON | OUT_PNG | OUT_PLY | OUT_GLB | OUT_VIEWER;
+  c->scale = 1;
   int opts_done = 0;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
@@ -802,6 +828,16 @@ static void parse_args(cli *c, int argc, char **argv) {
     } else if (!strcmp(a, "--dump-graph")) {
       c->dump_graph = NEXT();
       if (!*c->dump_graph) die_usage("--dump-graph: empty file name");
+    } else if (!strcmp(a, "--outputs")) {
+      parse_outputs(c, NEXT());
+    } else if (!strcmp(a, "--scale")) {
+      const char *v = NEXT();
+      c->scale = parse_real(a, v);
+      if (!(c->scale >= 1e-9 && c->scale <= 1e9))
+        die_usage("--scale must be in [1e-9, 1e9], got '%s'", v);
+    } else if (!strcmp(a, "--list-materials")) {
+      c->list_mats = NEXT();
+      if (!*c->list_mats) die_usage("--list-materials: empty file name");
     } else if (!strcmp(a, "--camera")) parse_camera(c, NEXT());
     else if (!strcmp(a, "--emit")) parse_emit(c, NEXT());
     else if (!strcmp(a, "--size")) parse_size(c, NEXT());
@@ -1590,6 +1626,70 @@ static void print_ranks(const hr_rank_stats *r, int n) {
 }
 
 /* "hrad: wrote DIR/{a,b,...}" and the number of snapshots. */
+/* Loads 'arg' (a built-in name or a scene file) with --scale applied. Exits on error. */
+static hr_scene *load_scene(const cli *c, const char *arg, const hr_log *log) {
+  hr_err err = {{0}};
+  hr_scene *scene = NULL;
+  hr_status st;
+  if (is_builtin(arg)) {
+    st = hr_scene_builtin(arg, &scene, &err);
+  } else {
+    struct stat sb;
+    if (stat(arg, &sb) != 0 && !hr_scene_format_known(arg) && !strchr(arg, '/')) {
+      char list[256] = "";
+      for (const char *const *n = hr_scene_builtin_names(); *n; n++)
+        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", list[0] ? ", " : "", *n);
+      fail("unknown scene '%s' (built-in: %s; or a path to a scene file)", arg, list);
+    }
+    st = hr_scene_load(arg, log, &scene, &err);
+  }
+  check(st, &err);
+  if (c->scale != 1 && hr_scene_scale(scene, c->scale) != HR_OK) {
+    hr_scene_destroy(&scene);
+    fail("%s: --scale %g puts coordinates beyond %g", arg, c->scale, HR_COORD_MAX);
+  }
+  return scene;
+}
+
+/* The names of the scene's input materials, comma-separated, in 'out' (cut with "..."). */
+static void material_list(const hr_scene *sc, char *out, size_t n) {
+  out[0] = '\0';
+  for (int k = 0; k < hr_scene_material_count(sc); k++) {
+    size_t l = strlen(out);
+    const char *nm = sc->mats[hr_scene_material_at(sc, k)].name;
+    if (l + strlen(nm) + 8 >= n) {
+      snprintf(out + l, n - l, ", ...");
+      return;
+    }
+    snprintf(out + l, n - l, "%s'%s'", k ? ", " : "", nm);
+  }
+}
+
+/* --emit: each name must be a material of the scene; an unknown one lists those that exist. */
+static void apply_emit(cli *c, hr_scene *scene) {
+  hr_err err = {{0}};
+  for (int i = 0; i < c->nemit; i++) {
+    if (hr_scene_find_material(scene, c->emit_name[i]) < 0) {
+      char list[400];
+      material_list(scene, list, sizeof list);
+      fail("--emit: %s has no material named '%s'; its materials: %s", scene->name,
+           c->emit_name[i], list);
+    }
+    check(hr_scene_set_emit(scene, c->emit_name[i], c->emit_rgb[i], &err), &err);
+    free(c->emit_name[i]);
+  }
+}
+
+/* --list-materials FILE: the input materials' names, one per line, on stdout. */
+static void list_materials(const cli *c) {
+  hr_log log = {c->quiet ? NULL : warn_cb, NULL};
+  hr_scene *scene = load_scene(c, c->list_mats, &log);
+  for (int k = 0; k < hr_scene_material_count(scene); k++)
+    printf("%s\n", scene->mats[hr_scene_material_at(scene, k)].name);
+  hr_scene_destroy(&scene);
+  exit(fflush(stdout) == 0 ? 0 : 1);
+}
+
 static void print_wrote(const cli *c) {
   fprintf(stderr, "hrad: wrote %s/{", c->disp);
   int k = 0;
@@ -1618,6 +1718,7 @@ int main(int argc, char **argv) {
   }
   parse_args(&c, argc, argv);
   c.snap_collect = c.snapshots && hr_dist_size(g_dist) > 1;
+  if (c.list_mats) list_materials(&c);
   if (g_rank != 0) c.quiet = 1, c.snapshots = 0; /* rank 0 prints and writes */
   start_signals();
   if (g_rank == 0) {
@@ -1633,28 +1734,10 @@ int main(int argc, char **argv) {
             hr_viewer_three_dir());
   hr_err err = {{0}};
   hr_log log = {c.quiet ? NULL : warn_cb, NULL};
-  hr_scene *scene = NULL;
+  hr_scene *scene = load_scene(&c, c.scene_arg, &log);
   hr_status st;
-  if (is_builtin(c.scene_arg)) {
-    st = hr_scene_builtin(c.scene_arg, &scene, &err);
-  } else {
-    size_t l = strlen(c.scene_arg);
-    struct stat sb;
-    if (stat(c.scene_arg, &sb) != 0 && !(l > 4 && !strcmp(c.scene_arg + l - 4, ".obj")) &&
-        !strchr(c.scene_arg, '/')) {
-      char list[256] = "";
-      for (const char *const *n = hr_scene_builtin_names(); *n; n++)
-        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", list[0] ? ", " : "", *n);
-      fail("unknown scene '%s' (built-in: %s; or a path to an .obj file)", c.scene_arg, list);
-    }
-    st = hr_scene_load_obj(c.scene_arg, &log, &scene, &err);
-  }
-  check(st, &err);
   check_stop(&c);
-  for (int i = 0; i < c.nemit; i++) {
-    check(hr_scene_set_emit(scene, c.emit_name[i], c.emit_rgb[i], &err), &err);
-    free(c.emit_name[i]);
-  }
+  apply_emit(&c, scene);
   free(c.emit_name);
   free(c.emit_rgb);
   c.scene = scene;
