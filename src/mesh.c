@@ -589,6 +589,7 @@ hr_status hr_mesh_build(const hr_scene *s, const hr_leaf *leaves, int64_t n, hr_
   }
   int ns = s->nsurfs, np = s->npolys > 0 ? s->npolys : 0;
   hr_mesh *m = calloc(1, sizeof *m);
+  if (m) m->scene = s;
   int64_t *cnt = calloc((size_t)ns + 1, sizeof *cnt);
   int64_t *idx = malloc((size_t)(n > 0 ? n : 1) * sizeof *idx);
   int64_t *order = malloc((size_t)(n > 0 ? n : 1) * sizeof *order);
@@ -832,70 +833,325 @@ static void sb_printf(sbuf *b, const char *fmt, ...) {
   }
 }
 
+/* Appends 'str' as a JSON string: quotes, backslashes and control characters escaped, bytes
+ * that are not UTF-8 replaced by '?' (the validator rejects them; OBJ names may hold any byte). */
+static void sb_json_string(sbuf *b, const char *str) {
+  const unsigned char *p = (const unsigned char *)str;
+  sb_printf(b, "\"");
+  while (*p) {
+    int n = *p < 0x80 ? 1 : (*p >> 5) == 6 ? 2 : (*p >> 4) == 14 ? 3 : (*p >> 3) == 30 ? 4 : 0;
+    for (int k = 1; k < n; k++)
+      if ((p[k] & 0xc0) != 0x80) n = 0;
+    if (n == 0) {
+      sb_printf(b, "?");
+      p++;
+    } else if (n == 1 && (*p < 32 || *p == '"' || *p == '\\')) {
+      sb_printf(b, *p < 32 ? "\\u%04x" : "\\%c", *p);
+      p++;
+    } else {
+      sb_printf(b, "%.*s", n, (const char *)p);
+      p += n;
+    }
+  }
+  sb_printf(b, "\"");
+}
+
+/* One glTF primitive: the triangles of one (object, input material) pair, and their vertices,
+ * both contiguous in the writer's order. */
+typedef struct gprim {
+  int obj, mat;            /* object, index of the input material among hr_scene_material_at */
+  int64_t v0, nv, t0, nt;  /* first vertex and count, first triangle and count */
+  float lo[3], hi[3];      /* position bounds */
+} gprim;
+
+/* The writer's layout of mesh 'm': primitives sorted by object, then material; 'vorder' the
+ * vertices in writer order, 'vnew' a vertex's writer index, 'torder' the triangles. */
+typedef struct glayout {
+  gprim *prim;
+  int nprim;
+  int64_t *vorder, *vnew, *torder;
+  int *mat_slot; /* scene material -> position among the input materials */
+  int nmat;
+} glayout;
+
+static void glayout_free(glayout *g) {
+  free(g->prim);
+  free(g->vorder);
+  free(g->vnew);
+  free(g->torder);
+  free(g->mat_slot);
+  memset(g, 0, sizeof *g);
+}
+
+/* Key of triangle 't': (object, material slot), or one key for all when there is no scene. */
+static int64_t tri_key(const hr_mesh *m, const glayout *g, int64_t t) {
+  const hr_scene *s = m->scene;
+  if (!s) return 0;
+  const hr_surface *f = &s->surfs[m->tri_surf[t]];
+  int o = hr_scene_poly_object(s, f->poly);
+  return (int64_t)(o < 0 ? 0 : o) * g->nmat + g->mat_slot[f->material];
+}
+
+/* Fills 'g' for 'm' (see glayout). 0 when out of memory. */
+static int glayout_build(const hr_mesh *m, glayout *g) {
+  const hr_scene *s = m->scene;
+  int nobj = s && s->nobjects > 0 ? s->nobjects : 1;
+  g->nmat = s ? hr_scene_material_count(s) : 1;
+  if (g->nmat < 1) g->nmat = 1;
+  int64_t nkeys = (int64_t)nobj * g->nmat;
+  g->mat_slot = calloc(s ? (size_t)s->nmats + 1 : 1, sizeof *g->mat_slot);
+  int64_t *cnt = calloc((size_t)nkeys + 1, sizeof *cnt);
+  int64_t *vk = malloc((size_t)m->nverts * sizeof *vk + 1);
+  g->vorder = malloc((size_t)m->nverts * sizeof *g->vorder + 1);
+  g->vnew = malloc((size_t)m->nverts * sizeof *g->vnew + 1);
+  g->torder = malloc((size_t)m->ntris * sizeof *g->torder + 1);
+  g->prim = malloc((size_t)(nkeys < m->ntris ? nkeys : m->ntris) * sizeof *g->prim + 1);
+  if (!g->mat_slot || !cnt || !vk || !g->vorder || !g->vnew || !g->torder || !g->prim) {
+    free(cnt);
+    free(vk);
+    return 0;
+  }
+  if (s)
+    for (int i = 0; i < s->nmats; i++) {
+      int b = s->mats[i].base, k = 0;
+      for (int j = 0; j < b; j++) k += s->mats[j].base == j;
+      g->mat_slot[i] = k;
+    }
+  for (int64_t v = 0; v < m->nverts; v++) vk[v] = -1;
+  for (int64_t t = 0; t < m->ntris; t++) {
+    int64_t k = tri_key(m, g, t);
+    cnt[k + 1]++;
+    for (int c = 0; c < 3; c++) vk[m->tri[3 * t + c]] = k;
+  }
+  for (int64_t k = 0; k < nkeys; k++) cnt[k + 1] += cnt[k];
+  g->nprim = 0;
+  for (int64_t k = 0; k < nkeys; k++) /* primitives, triangles in key order */
+    if (cnt[k + 1] > cnt[k]) {
+      gprim *p = &g->prim[g->nprim++];
+      memset(p, 0, sizeof *p);
+      p->obj = (int)(k / g->nmat);
+      p->mat = (int)(k % g->nmat);
+      p->t0 = cnt[k];
+      p->nt = cnt[k + 1] - cnt[k];
+    }
+  int64_t *fill = malloc((size_t)nkeys * sizeof *fill + 1);
+  if (!fill) {
+    free(cnt);
+    free(vk);
+    return 0;
+  }
+  memcpy(fill, cnt, (size_t)nkeys * sizeof *fill);
+  for (int64_t t = 0; t < m->ntris; t++) g->torder[fill[tri_key(m, g, t)]++] = t;
+  /* vertices: counted by key, placed in key order (unused vertices are not written) */
+  memset(cnt, 0, (size_t)(nkeys + 1) * sizeof *cnt);
+  for (int64_t v = 0; v < m->nverts; v++)
+    if (vk[v] >= 0) cnt[vk[v] + 1]++;
+  for (int64_t k = 0; k < nkeys; k++) cnt[k + 1] += cnt[k];
+  memcpy(fill, cnt, (size_t)nkeys * sizeof *fill);
+  for (int64_t v = 0; v < m->nverts; v++) {
+    g->vnew[v] = -1;
+    if (vk[v] >= 0) {
+      g->vnew[v] = fill[vk[v]];
+      g->vorder[fill[vk[v]]++] = v;
+    }
+  }
+  for (int i = 0; i < g->nprim; i++) {
+    gprim *p = &g->prim[i];
+    int64_t k = (int64_t)p->obj * g->nmat + p->mat;
+    p->v0 = cnt[k];
+    p->nv = cnt[k + 1] - cnt[k];
+    for (int c = 0; c < 3; c++) p->lo[c] = INFINITY, p->hi[c] = -INFINITY;
+    for (int64_t j = p->v0; j < p->v0 + p->nv; j++)
+      for (int c = 0; c < 3; c++) {
+        float x = m->pos[3 * g->vorder[j] + c];
+        if (x < p->lo[c]) p->lo[c] = x;
+        if (x > p->hi[c]) p->hi[c] = x;
+      }
+  }
+  free(fill);
+  free(cnt);
+  free(vk);
+  return 1;
+}
+
+/* The name of object 'o' and of material slot 'k' for the glTF. */
+static const char *obj_name(const hr_scene *s, int o) {
+  const char *n = s ? hr_scene_object_name(s, o) : NULL;
+  return n ? n : "radiosity";
+}
+
+static const char *mat_name(const hr_scene *s, int k) {
+  int i = s ? hr_scene_material_at(s, k) : -1;
+  return i >= 0 ? s->mats[i].name : "radiosity";
+}
+
+/* The JSON chunk of the GLB: nodes and meshes per object, materials, buffer views, accessors. */
+static void glb_json(sbuf *j, const hr_mesh *m, const glayout *g, double exposure,
+                     size_t npos, size_t nidx) {
+  const hr_scene *s = m->scene;
+  sb_printf(j, "\"extensionsUsed\":[\"KHR_materials_unlit\"],\"scene\":0,\"scenes\":[{\"nodes\":[");
+  int nmesh = 0; /* objects without triangles get no node */
+  for (int i = 0; i < g->nprim; i++)
+    if (i == 0 || g->prim[i].obj != g->prim[i - 1].obj) {
+      sb_printf(j, "%s%d", nmesh ? "," : "", nmesh);
+      nmesh++;
+    }
+  sb_printf(j, "]}],\"nodes\":[");
+  for (int i = 0, k = 0; i < g->nprim; k++) {
+    int o = g->prim[i].obj;
+    sb_printf(j, "%s{\"mesh\":%d,\"name\":", k ? "," : "", k);
+    sb_json_string(j, obj_name(s, o));
+    sb_printf(j, "}");
+    while (i < g->nprim && g->prim[i].obj == o) i++;
+  }
+  sb_printf(j, "],\"meshes\":[");
+  for (int i = 0, k = 0; i < g->nprim; k++) {
+    int o = g->prim[i].obj;
+    sb_printf(j, "%s{\"name\":", k ? "," : "");
+    sb_json_string(j, obj_name(s, o));
+    sb_printf(j, ",\"primitives\":[");
+    for (int first = 1; i < g->nprim && g->prim[i].obj == o; i++, first = 0)
+      sb_printf(j,
+                "%s{\"attributes\":{\"POSITION\":%d,\"COLOR_0\":%d,\"_RADIOSITY\":%d},"
+                "\"indices\":%d,\"material\":%d,\"mode\":4}",
+                first ? "" : ",", 4 * i, 4 * i + 1, 4 * i + 2, 4 * i + 3, g->prim[i].mat);
+    sb_printf(j, "]}");
+  }
+  sb_printf(j, "],\"materials\":[");
+  for (int k = 0; k < g->nmat; k++) {
+    int mi = s ? hr_scene_material_at(s, k) : -1;
+    const double *r = mi >= 0 ? s->mats[mi].rho : NULL, *e = mi >= 0 ? s->mats[mi].emit : NULL;
+    sb_printf(j, "%s{\"name\":", k ? "," : "");
+    sb_json_string(j, mat_name(s, k));
+    sb_printf(j, ",\"pbrMetallicRoughness\":{\"baseColorFactor\":[1,1,1,1],\"metallicFactor\":0,"
+                 "\"roughnessFactor\":1},\"doubleSided\":false,"
+                 "\"extensions\":{\"KHR_materials_unlit\":{}}");
+    if (r)
+      sb_printf(j, ",\"extras\":{\"reflectance\":[%.9g,%.9g,%.9g],\"emission\":[%.9g,%.9g,%.9g]}",
+                r[0], r[1], r[2], e[0], e[1], e[2]);
+    sb_printf(j, "}");
+  }
+  size_t binlen = 3 * npos + nidx;
+  sb_printf(j,
+            "],\"buffers\":[{\"byteLength\":%zu}],\"bufferViews\":["
+            "{\"buffer\":0,\"byteOffset\":0,\"byteLength\":%zu,\"byteStride\":12,\"target\":34962},"
+            "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"byteStride\":12,\"target\":34962},"
+            "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"byteStride\":12,\"target\":34962},"
+            "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"target\":34963}],\"accessors\":[",
+            binlen, npos, npos, npos, 2 * npos, npos, 3 * npos, nidx);
+  for (int i = 0; i < g->nprim; i++) {
+    const gprim *p = &g->prim[i];
+    long long vo = (long long)p->v0 * 12, nv = (long long)p->nv;
+    sb_printf(j,
+              "%s{\"bufferView\":0,\"byteOffset\":%lld,\"componentType\":5126,\"count\":%lld,"
+              "\"type\":\"VEC3\",\"min\":[%.9g,%.9g,%.9g],\"max\":[%.9g,%.9g,%.9g]},"
+              "{\"bufferView\":1,\"byteOffset\":%lld,\"componentType\":5126,\"count\":%lld,"
+              "\"type\":\"VEC3\"},"
+              "{\"bufferView\":2,\"byteOffset\":%lld,\"componentType\":5126,\"count\":%lld,"
+              "\"type\":\"VEC3\"},"
+              "{\"bufferView\":3,\"byteOffset\":%lld,\"componentType\":5125,\"count\":%lld,"
+              "\"type\":\"SCALAR\"}",
+              i ? "," : "", vo, nv, (double)p->lo[0], (double)p->lo[1], (double)p->lo[2],
+              (double)p->hi[0], (double)p->hi[1], (double)p->hi[2], vo, nv, vo, nv,
+              (long long)p->t0 * 12, (long long)p->nt * 3);
+  }
+  sb_printf(j, "]}");
+  (void)exposure;
+}
+
+/* Writes the BIN chunk's vertex arrays in writer order: pass 0 positions, 1 COLOR_0, 2 B. */
+static int glb_put_verts(FILE *fp, const hr_mesh *m, const glayout *g, int64_t nv,
+                         double exposure, int *e) {
+  enum { CHUNK = 4096 };
+  uint8_t buf[CHUNK * 12];
+  for (int pass = 0; pass < 3; pass++)
+    for (int64_t v0 = 0; v0 < nv; v0 += CHUNK) {
+      int64_t v1 = v0 + CHUNK < nv ? v0 + CHUNK : nv;
+      uint8_t *p = buf;
+      for (int64_t w = v0; w < v1; w++)
+        for (int c = 0; c < 3; c++, p += 4) {
+          int64_t v = g->vorder[w];
+          float x = pass == 0 ? m->pos[3 * v + c] : m->B[3 * v + c];
+          if (pass == 1) {
+            x = (float)(m->B[3 * v + c] * exposure);
+            if (!(x > 0)) x = 0; /* also NaN */
+            if (x > 1) x = 1;
+          }
+          put_f32(p, x);
+        }
+      if (fwrite(buf, 1, (size_t)(p - buf), fp) != (size_t)(p - buf)) {
+        *e = errno;
+        return 0;
+      }
+    }
+  return 1;
+}
+
+/* Writes the indices, each relative to its primitive's first vertex. */
+static int glb_put_tris(FILE *fp, const hr_mesh *m, const glayout *g, int *e) {
+  enum { CHUNK = 4096 };
+  uint8_t buf[CHUNK * 12];
+  for (int i = 0; i < g->nprim; i++) {
+    const gprim *pr = &g->prim[i];
+    for (int64_t t0 = pr->t0; t0 < pr->t0 + pr->nt; t0 += CHUNK) {
+      int64_t t1 = t0 + CHUNK < pr->t0 + pr->nt ? t0 + CHUNK : pr->t0 + pr->nt;
+      uint8_t *p = buf;
+      for (int64_t w = t0; w < t1; w++)
+        for (int c = 0; c < 3; c++, p += 4)
+          put_u32(p, (uint32_t)(g->vnew[m->tri[3 * g->torder[w] + c]] - pr->v0));
+      if (fwrite(buf, 1, (size_t)(p - buf), fp) != (size_t)(p - buf)) {
+        *e = errno;
+        return 0;
+      }
+    }
+  }
+  return 1;
+}
+
 hr_status hr_glb_write(const char *path, const hr_mesh *m, double exposure, hr_err *err) {
   if (!m || !path) return hr_err_set(err, HR_ERR_INVALID, "hr_glb_write: no mesh or path");
   if (!isfinite(exposure) || exposure < 0)
     return hr_err_set(err, HR_ERR_INVALID, "%s: bad exposure %g", path, exposure);
   int has = m->nverts > 0 && m->ntris > 0;
-  size_t npos = has ? (size_t)m->nverts * 12 : 0, ncol = npos;
-  size_t nidx = has ? (size_t)m->ntris * 12 : 0;
-  size_t binlen = npos + ncol + nidx; /* all multiples of 4 */
+  glayout g;
+  memset(&g, 0, sizeof g);
+  if (has && !glayout_build(m, &g)) {
+    glayout_free(&g);
+    return hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
+  }
+  int64_t nv = 0;
+  for (int i = 0; i < g.nprim; i++) nv += g.prim[i].nv;
+  size_t npos = has ? (size_t)nv * 12 : 0, nidx = has ? (size_t)m->ntris * 12 : 0;
+  size_t binlen = 3 * npos + nidx; /* all multiples of 4 */
   sbuf j = {0};
   sb_printf(&j,
             "{\"asset\":{\"version\":\"2.0\",\"generator\":\"hrad\","
             "\"extras\":{\"exposure\":%.17g,\"colors\":\"COLOR_0 = linear radiosity * exposure, "
-            "clamped to [0,1]\"}},",
+            "clamped to [0,1]; _RADIOSITY = linear radiosity B in W/m^2, unclamped\"}},",
             exposure);
   if (!has) {
     j.len--; /* an empty model: the asset alone */
     sb_printf(&j, "}");
   } else {
-    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (int64_t v = 0; v < m->nverts; v++)
-      for (int c = 0; c < 3; c++) {
-        float x = m->pos[3 * v + c];
-        if (x < lo[c]) lo[c] = x;
-        if (x > hi[c]) hi[c] = x;
-      }
-    sb_printf(
-        &j,
-        "\"extensionsUsed\":[\"KHR_materials_unlit\"],"
-        "\"scene\":0,\"scenes\":[{\"nodes\":[0]}],"
-        "\"nodes\":[{\"mesh\":0,\"name\":\"hrad\"}],"
-        "\"meshes\":[{\"name\":\"radiosity\",\"primitives\":[{\"attributes\":"
-        "{\"POSITION\":0,\"COLOR_0\":1},\"indices\":2,\"material\":0,\"mode\":4}],"
-        "\"extras\":{\"exposure\":%.17g}}],"
-        "\"materials\":[{\"name\":\"radiosity\",\"pbrMetallicRoughness\":"
-        "{\"baseColorFactor\":[1,1,1,1],\"metallicFactor\":0,\"roughnessFactor\":1},"
-        "\"doubleSided\":false,\"extensions\":{\"KHR_materials_unlit\":{}}}],"
-        "\"buffers\":[{\"byteLength\":%zu}],"
-        "\"bufferViews\":["
-        "{\"buffer\":0,\"byteOffset\":0,\"byteLength\":%zu,\"byteStride\":12,\"target\":34962},"
-        "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"byteStride\":12,\"target\":34962},"
-        "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"target\":34963}],"
-        "\"accessors\":["
-        "{\"bufferView\":0,\"componentType\":5126,\"count\":%lld,\"type\":\"VEC3\","
-        "\"min\":[%.17g,%.17g,%.17g],\"max\":[%.17g,%.17g,%.17g]},"
-        "{\"bufferView\":1,\"componentType\":5126,\"count\":%lld,\"type\":\"VEC3\"},"
-        "{\"bufferView\":2,\"componentType\":5125,\"count\":%lld,\"type\":\"SCALAR\"}]}",
-        exposure, binlen, npos, npos, ncol, npos + ncol, nidx, (long long)m->nverts, (double)lo[0],
-        (double)lo[1], (double)lo[2], (double)hi[0], (double)hi[1], (double)hi[2],
-        (long long)m->nverts, (long long)3 * m->ntris);
+    glb_json(&j, m, &g, exposure, npos, nidx);
   }
   if (j.nomem) {
     free(j.s);
+    glayout_free(&g);
     return hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
   }
   size_t jlen = (j.len + 3) & ~(size_t)3;
   size_t total = 12 + 8 + jlen + (has ? 8 + binlen : 0);
   if (total > UINT32_MAX) {
     free(j.s);
+    glayout_free(&g);
     return hr_err_set(err, HR_ERR_TOO_BIG, "%s: mesh too large for GLB (%zu bytes)", path, total);
   }
   FILE *fp = fopen(path, "wb");
   if (!fp) {
     int e = errno;
     free(j.s);
+    glayout_free(&g);
     return hr_err_set(err, HR_ERR_IO, "%s: cannot open for writing: %s", path, strerror(e));
   }
   uint8_t hdr[20];
@@ -914,35 +1170,8 @@ hr_status hr_glb_write(const char *path, const hr_mesh *m, double exposure, hr_e
     put_u32(ch + 4, 0x004E4942u); /* "BIN\0" */
     ok = fwrite(ch, 1, 8, fp) == 8;
     if (!ok) e = errno;
-    enum { CHUNK = 4096 };
-    uint8_t buf[CHUNK * 12];
-    for (int pass = 0; pass < 2 && ok; pass++)
-      for (int64_t v0 = 0; v0 < m->nverts && ok; v0 += CHUNK) {
-        int64_t v1 = v0 + CHUNK < m->nverts ? v0 + CHUNK : m->nverts;
-        uint8_t *p = buf;
-        for (int64_t v = v0; v < v1; v++)
-          for (int c = 0; c < 3; c++, p += 4) {
-            float x;
-            if (pass == 0) {
-              x = m->pos[3 * v + c];
-            } else {
-              x = (float)(m->B[3 * v + c] * exposure);
-              if (!(x > 0)) x = 0; /* also NaN */
-              if (x > 1) x = 1;
-            }
-            put_f32(p, x);
-          }
-        ok = fwrite(buf, 1, (size_t)(p - buf), fp) == (size_t)(p - buf);
-        if (!ok) e = errno;
-      }
-    for (int64_t t0 = 0; t0 < m->ntris && ok; t0 += CHUNK) {
-      int64_t t1 = t0 + CHUNK < m->ntris ? t0 + CHUNK : m->ntris;
-      uint8_t *p = buf;
-      for (int64_t t = t0; t < t1; t++)
-        for (int c = 0; c < 3; c++, p += 4) put_u32(p, m->tri[3 * t + c]);
-      ok = fwrite(buf, 1, (size_t)(p - buf), fp) == (size_t)(p - buf);
-      if (!ok) e = errno;
-    }
+    ok = ok && glb_put_verts(fp, m, &g, nv, exposure, &e) && glb_put_tris(fp, m, &g, &e);
   }
+  glayout_free(&g);
   return hr_file_close(fp, path, ok, e, err);
 }

@@ -35,6 +35,8 @@ typedef struct hr_mesh {
                         triangle lies in; used by the flat "elements" rendering */
   uint8_t *tri_emit; /* ntris, 1 when the triangle's material emits (emit > 0 in any channel) */
   int64_t ncentre;   /* how many of the vertices are added leaf centres (see hr_mesh_build) */
+  const hr_scene *scene; /* the scene it was built from (objects and materials for the GLB);
+                            must outlive the mesh */
 } hr_mesh;
 
 /* Builds the smooth mesh from 'n' leaves (in any order) of scene 's'.
@@ -101,9 +103,14 @@ hr_status hr_pfm_write(const char *path, int w, int h, const float *rgb, hr_err 
  * list uchar int vertex_indices. The header carries "comment exposure X". */
 hr_status hr_ply_write(const char *path, const hr_mesh *m, double exposure, hr_err *err);
 
-/* glTF 2.0 binary: one mesh with one primitive (POSITION, COLOR_0 = linear B * exposure clamped
- * to [0,1], UNSIGNED_INT indices), one unlit single-sided material (KHR_materials_unlit), one
- * node; asset.generator "hrad" and asset.extras {"exposure": X}. */
+/* glTF 2.0 binary that keeps the input's identity: one node and one mesh per object of the scene
+ * (named like it; objects without triangles left out), one primitive per material used in it;
+ * one material per input material (named like it, in input order; single-sided,
+ * KHR_materials_unlit with base colour white, so that COLOR_0 is what a viewer shows; the
+ * material's reflectance and emission in its extras). Attributes: POSITION, COLOR_0 (linear B *
+ * exposure clamped to [0,1]), _RADIOSITY (linear B in W/m^2, float VEC3, unclamped); UNSIGNED_INT
+ * indices. asset.generator "hrad", asset.extras {"exposure": X, "colors": ...}. A mesh without a
+ * scene (m->scene NULL) is one node, mesh and material named "radiosity". */
 hr_status hr_glb_write(const char *path, const hr_mesh *m, double exposure, hr_err *err);
 
 /* Writes viewer.html at 'path': a self-contained page (three.js, OrbitControls and GLTFLoader
