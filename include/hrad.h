@@ -206,9 +206,11 @@ hr_status hr_scene_load_obj(const char *path, const hr_log *log, hr_scene **out,
  * cannot read); warnings (degenerate polygons, clamped colours, unreadable textures) go to 'log'.
  * Nothing is kept on error. */
 hr_status hr_scene_import(const char *path, const hr_log *log, hr_scene **out, hr_err *err);
-/* Loads 'path' by its extension (case-insensitive): .obj with hr_scene_load_obj, the formats of
- * hr_scene_import with it; any other extension is HR_ERR_INVALID ("PATH: unknown scene format
- * '.X' (...)"), so that no file is read as a format it is not. */
+/* Loads 'path' by its extension (case-insensitive): .obj (or no extension) with
+ * hr_scene_load_obj, the formats of hr_scene_import with it; any other extension is
+ * HR_ERR_INVALID ("PATH: unknown scene format '.X' (...)"). hr_scene_import also checks the
+ * first bytes against the extension's format, so that no file is read as a format it is not
+ * (assimp alone would read an OBJ text named .gltf as OBJ). */
 hr_status hr_scene_load(const char *path, const hr_log *log, hr_scene **out, hr_err *err);
 /* 1 if hr_scene_load takes a file named 'path' (by its extension). */
 int hr_scene_format_known(const char *path);

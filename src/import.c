@@ -102,7 +102,47 @@ static int is_import_ext(const char *ext) {
 int hr_scene_format_known(const char *path) {
   char ext[16];
   ext_of(path, ext, sizeof ext);
-  return !strcmp(ext, "obj") || is_import_ext(ext);
+  return !strcmp(ext, "obj") || !ext[0] || is_import_ext(ext);
+}
+
+/* 1 when the first 'n' bytes 'h' of a file of 'size' bytes can start a file of format 'ext'.
+ * assimp, when the reader for the extension refuses a file, tries every reader on its content
+ * (an OBJ text named .gltf loaded as OBJ): this check keeps a file to its extension's format. */
+static int sniff(const char *ext, const unsigned char *h, size_t n, long long size) {
+  size_t i = 0;
+  if (n >= 3 && h[0] == 0xef && h[1] == 0xbb && h[2] == 0xbf) i = 3; /* UTF-8 BOM */
+  while (i < n && isspace(h[i])) i++;
+  const char *t = (const char *)h + i;
+  size_t m = n - i;
+  if (!strcmp(ext, "glb")) return n >= 4 && !memcmp(h, "glTF", 4);
+  if (!strcmp(ext, "gltf")) return m >= 1 && t[0] == '{';
+  if (!strcmp(ext, "ply")) return n >= 3 && !memcmp(h, "ply", 3);
+  if (!strcmp(ext, "dae")) return m >= 1 && t[0] == '<';
+  if (!strcmp(ext, "3ds")) return n >= 2 && h[0] == 0x4d && h[1] == 0x4d;
+  if (!strcmp(ext, "fbx"))
+    return (n >= 18 && !memcmp(h, "Kaydara FBX Binary", 18)) || (m >= 1 && (t[0] == ';' ||
+                                                                            isalpha(t[0])));
+  if (!strcmp(ext, "stl")) {
+    if (m >= 5 && !strncasecmp(t, "solid", 5)) return 1;
+    if (size < 84 || n < 84) return 0;
+    unsigned long long ntri = h[80] | (unsigned)h[81] << 8 | (unsigned)h[82] << 16 |
+                              (unsigned long long)h[83] << 24;
+    return (unsigned long long)size == 84 + 50 * ntri;
+  }
+  return 0;
+}
+
+/* Checks with sniff() that 'path' holds its extension's format. */
+static hr_status check_format(const char *path, const char *ext, long long size, hr_err *err) {
+  unsigned char h[128];
+  FILE *fp = fopen(path, "rb");
+  if (!fp) return hr_err_set(err, HR_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
+  size_t n = fread(h, 1, sizeof h, fp);
+  fclose(fp);
+  if (!sniff(ext, h, n, size))
+    return hr_err_set(err, HR_ERR_PARSE, "%s: not a .%s file (its first bytes do not fit)", path,
+                      ext);
+  return HR_OK;
 }
 
 /* Base name of 'path' without its extension ("scene" if empty); NULL when out of memory. */
@@ -254,6 +294,9 @@ static void material_name(imp_ctx *c, unsigned i, char *out, size_t n) {
   char base[NAME_MAX_LEN + 1] = "";
   if (aiGetMaterialString(c->ai->mMaterials[i], AI_MATKEY_NAME, &nm) == aiReturn_SUCCESS)
     clean_name(&nm, base, sizeof base);
+  char ext[16];
+  ext_of(c->path, ext, sizeof ext);
+  if (!strcmp(ext, "ply") || !strcmp(ext, "stl")) snprintf(base, sizeof base, "default");
   if (!base[0]) snprintf(base, sizeof base, "material %u", i);
   snprintf(out, n, "%s", base);
   for (int k = 2; hr_scene_find_material(c->s, out) >= 0; k++) snprintf(out, n, "%s#%d", base, k);
@@ -279,10 +322,14 @@ static hr_status material_emit(imp_ctx *c, const struct aiMaterial *m, const cha
   return HR_OK;
 }
 
-/* Reflectance of 'm': base colour, else diffuse, else grey; clamped to [0,1]. */
+/* Reflectance of 'm': base colour, else diffuse, else grey; clamped to [0,1]. PLY and STL have
+ * no materials (assimp makes a white one): grey 0.5, as for OBJ faces without a material. */
 static hr_status material_rho(imp_ctx *c, const struct aiMaterial *m, const char *name,
                               double r[3]) {
-  if (!mat_color(m, AI_MATKEY_BASE_COLOR, r) && !mat_color(m, AI_MATKEY_COLOR_DIFFUSE, r))
+  char ext[16];
+  ext_of(c->path, ext, sizeof ext);
+  int none = !strcmp(ext, "ply") || !strcmp(ext, "stl");
+  if (none || (!mat_color(m, AI_MATKEY_BASE_COLOR, r) && !mat_color(m, AI_MATKEY_COLOR_DIFFUSE, r)))
     r[0] = r[1] = r[2] = 0.5;
   for (int ch = 0; ch < 3; ch++) {
     if (!isfinite(r[ch]))
@@ -508,7 +555,9 @@ static hr_status check_file(const char *path, hr_err *err) {
   if (access(path, R_OK) != 0)
     return hr_err_set(err, HR_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
   if (sb.st_size == 0) return hr_err_set(err, HR_ERR_PARSE, "%s: empty file", path);
-  return HR_OK;
+  char ext[16];
+  ext_of(path, ext, sizeof ext);
+  return check_format(path, ext, (long long)sb.st_size, err);
 }
 
 hr_status hr_scene_import(const char *path, const hr_log *log, hr_scene **out, hr_err *err) {
@@ -563,10 +612,10 @@ hr_status hr_scene_load(const char *path, const hr_log *log, hr_scene **out, hr_
   if (!path) return hr_err_set(err, HR_ERR_INVALID, "hr_scene_load: no path");
   char ext[16];
   ext_of(path, ext, sizeof ext);
-  if (!strcmp(ext, "obj")) return hr_scene_load_obj(path, log, out, err);
+  if (!strcmp(ext, "obj") || !ext[0]) return hr_scene_load_obj(path, log, out, err);
   if (is_import_ext(ext)) return hr_scene_import(path, log, out, err);
   return hr_err_set(err, HR_ERR_INVALID,
-                    "%s: unknown scene format%s%s%s (known: .obj .gltf .glb .ply .3ds .fbx .dae "
-                    ".stl)",
-                    path, ext[0] ? " '." : " (no extension)", ext, ext[0] ? "'" : "");
+                    "%s: unknown scene format '.%s' (known: .obj .gltf .glb .ply .3ds .fbx .dae "
+                    ".stl; no extension: .obj)",
+                    path, ext);
 }

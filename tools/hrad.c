@@ -481,13 +481,16 @@ static void usage(void) {
   printf(
       "Usage: hrad [OPTIONS] [--] [SCENE]\n"
       "Hierarchical radiosity (Bohn & Garmann, WSCG'95). SCENE is a built-in name\n"
-      "(%s; default room) or a path to a Wavefront .obj file\n"
-      "with its .mtl.\n"
+      "(%s; default room) or a scene file, read by its extension:\n"
+      ".obj (with its .mtl), or through assimp .gltf .glb .ply .3ds .fbx .dae .stl.\n"
       "\n"
       "Output (written as one set: DIR holds the complete previous or the complete new set):\n"
       "  -o, --out DIR        output directory (default hrad-out): surfaces.csv, stats.json,\n"
       "                       SCENE.png, SCENE-elements.png, SCENE.ply, SCENE.glb, viewer.html;\n"
       "                       other files in DIR are kept, subdirectories are refused\n"
+      "  --outputs LIST       write only these, comma-separated: csv (surfaces.csv), json\n"
+      "                       (stats.json), png (SCENE.png, SCENE-elements.png), ply, glb,\n"
+      "                       viewer (default: all)\n"
       "  --size WxH           image size (default 800x600): each side %d..%d, at most\n"
       "                       %ld pixels\n"
       "  --camera E:A[:FOV]   camera eye and look-at point, 'ex,ey,ez:ax,ay,az[:fov]' (degrees,\n"
@@ -531,6 +534,9 @@ static void usage(void) {
       "Scene:\n"
       "  --emit NAME=R,G,B    make material NAME emit radiosity R,G,B (W/m^2: 0 or %g..%g);\n"
       "                       repeatable\n"
+      "  --list-materials FILE  print the material names of scene FILE, one per line, and exit\n"
+      "  --scale S            multiply every coordinate by S (1e-9..1e9; e.g. 0.001 for a scene\n"
+      "                       in millimetres, to get metres); radiosity is per m^2 of the result\n"
       "\n"
       "Solver (thresholds are dimensionless: errors relative to the light each element\n"
       "receives, B relative to the scene's mean radiosity, areas relative to the total area,\n"
@@ -1225,48 +1231,75 @@ static void check_lit(const cli *c, const hr_solver *s) {
             sc->name, others);
 }
 
+/* Writes the mesh files --outputs asks for: SCENE.ply, SCENE.glb, viewer.html (the viewer
+ * embeds a .glb: without glb in --outputs one is written under a hidden name and removed). */
+static void write_meshes(cli *c, const hr_mesh *m, double expo) {
+  hr_err err = {{0}};
+  char path[sizeof c->stage + 300], name[PATH_MAX];
+  const char *nm = c->scene->name;
+  lock();
+  if (c->outputs & OUT_PLY) {
+    snprintf(name, sizeof name, "%s.ply", nm);
+    check(hr_ply_write(stage_file(c, name, path, sizeof path), m, expo, &err), &err);
+  }
+  int viewer = c->viewer && (c->outputs & OUT_VIEWER);
+  if (c->outputs & OUT_GLB) {
+    snprintf(name, sizeof name, "%s.glb", nm);
+    check(hr_glb_write(stage_file(c, name, path, sizeof path), m, expo, &err), &err);
+  } else if (viewer) {
+    snprintf(name, sizeof name, ".hrad-viewer.glb");
+    if (!*join(path, sizeof path, c->stage, name)) fail("%s/%s: path too long", c->disp, name);
+    check(hr_glb_write(path, m, expo, &err), &err);
+  }
+  if (viewer)
+    check(hr_viewer_write(stage_file(c, "viewer.html", path, sizeof path), name, &err), &err);
+  if (viewer && !(c->outputs & OUT_GLB) && join(path, sizeof path, c->stage, name)[0])
+    unlink(path);
+  unlock();
+}
+
 /* Renders the current solution from the run's camera and writes 'png_name' into the staging
- * directory. With 'all' it also writes the elements image, PLY, GLB, viewer and PFM. */
+ * directory (unless 'all' and --outputs leaves out png). With 'all' it also writes the elements
+ * image, the PFM and the mesh files that --outputs asks for. */
 static void write_pictures(cli *c, const hr_solver *s, const char *png_name, int all) {
   hr_err err = {{0}};
+  unsigned meshes = c->outputs & (OUT_PLY | OUT_GLB | OUT_VIEWER);
+  int png = !all || (c->outputs & OUT_PNG);
+  if (!png && !meshes && !c->hdr) return;
   hr_leaf *leaves;
   int64_t n;
   double expo;
   hr_mesh *m = solution_mesh(c, s, &leaves, &n, &expo);
   float *img = malloc((size_t)c->w * c->h * 3 * sizeof *img);
   if (!img) fail("out of memory");
-  char path[sizeof c->stage + 300];
-  render(c, m, leaves, n, 0, 1.0 / expo, img);
-  lock();
-  check(hr_png_write(stage_file(c, png_name, path, sizeof path), c->w, c->h, img, expo, &err),
-        &err);
-  unlock();
-  if (all) {
-    const char *nm = c->scene->name;
-    char name[PATH_MAX];
-    if (c->hdr) {
-      check_stop(c);
-      render(c, m, leaves, n, 0, 0, img);
-      snprintf(name, sizeof name, "%s.pfm", nm);
-      lock();
-      check(hr_pfm_write(stage_file(c, name, path, sizeof path), c->w, c->h, img, &err), &err);
-      unlock();
-    }
+  char path[sizeof c->stage + 300], name[PATH_MAX];
+  const char *nm = c->scene->name;
+  if (png) {
+    render(c, m, leaves, n, 0, 1.0 / expo, img);
+    lock();
+    check(hr_png_write(stage_file(c, png_name, path, sizeof path), c->w, c->h, img, expo, &err),
+          &err);
+    unlock();
+  }
+  if (all && c->hdr) {
+    check_stop(c);
+    render(c, m, leaves, n, 0, 0, img);
+    snprintf(name, sizeof name, "%s.pfm", nm);
+    lock();
+    check(hr_pfm_write(stage_file(c, name, path, sizeof path), c->w, c->h, img, &err), &err);
+    unlock();
+  }
+  if (all && png) {
     check_stop(c);
     render(c, m, leaves, n, 1, 1.0 / expo, img);
     snprintf(name, sizeof name, "%s-elements.png", nm);
     lock();
     check(hr_png_write(stage_file(c, name, path, sizeof path), c->w, c->h, img, expo, &err), &err);
     unlock();
+  }
+  if (all && meshes) {
     check_stop(c);
-    lock();
-    snprintf(name, sizeof name, "%s.ply", nm);
-    check(hr_ply_write(stage_file(c, name, path, sizeof path), m, expo, &err), &err);
-    snprintf(name, sizeof name, "%s.glb", nm);
-    check(hr_glb_write(stage_file(c, name, path, sizeof path), m, expo, &err), &err);
-    if (c->viewer)
-      check(hr_viewer_write(stage_file(c, "viewer.html", path, sizeof path), name, &err), &err);
-    unlock();
+    write_meshes(c, m, expo);
   }
   free(img);
   hr_mesh_destroy(&m);
@@ -1635,7 +1668,9 @@ static hr_scene *load_scene(const cli *c, const char *arg, const hr_log *log) {
     st = hr_scene_builtin(arg, &scene, &err);
   } else {
     struct stat sb;
-    if (stat(arg, &sb) != 0 && !hr_scene_format_known(arg) && !strchr(arg, '/')) {
+    const char *dot = strrchr(arg, '.');
+    int file_like = strchr(arg, '/') || (dot && dot > arg && hr_scene_format_known(arg));
+    if (stat(arg, &sb) != 0 && !file_like) {
       char list[256] = "";
       for (const char *const *n = hr_scene_builtin_names(); *n; n++)
         snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", list[0] ? ", " : "", *n);
@@ -1805,8 +1840,10 @@ int main(int argc, char **argv) {
   c.rep = open_memstream(&c.rep_buf, &c.rep_len);
   if (!c.rep) c.rep = stderr;
   lock();
-  check(hr_report_csv(stage_file(&c, "surfaces.csv", path, sizeof path), s, &err), &err);
-  check(hr_report_json(stage_file(&c, "stats.json", path, sizeof path), s, &c.opt, &err), &err);
+  if (c.outputs & OUT_CSV)
+    check(hr_report_csv(stage_file(&c, "surfaces.csv", path, sizeof path), s, &err), &err);
+  if (c.outputs & OUT_JSON)
+    check(hr_report_json(stage_file(&c, "stats.json", path, sizeof path), s, &c.opt, &err), &err);
   unlock();
   check_stop(&c);
   snprintf(name, sizeof name, "%s.png", scene->name);
