@@ -22,6 +22,7 @@
 #include "vec.h"
 
 #include <errno.h>
+#include <float.h>
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -564,6 +565,151 @@ static hr_status build_group(build *bd, const hr_scene *s, const int *surfs, int
   return HR_OK;
 }
 
+/* ------------------------------------------------------------------ smoothing across polygons */
+
+static double tri_area(const hr_mesh *m, int64_t t);
+
+/* Largest angle between the normals of two polygons shaded as one surface: cos(0.8 degrees).
+ * Exporters' triangles of one flat wall agree to about 1e-6; the facets of a tessellated
+ * cylinder or sphere differ by several degrees and stay apart, like any crease. */
+#define SMOOTH_COS 0.9999
+
+static int64_t uf_find(int64_t *par, int64_t v) {
+  while (par[v] != v) v = par[v] = par[par[v]];
+  return v;
+}
+
+/* Cell of position 'p' on the grid of side 'eps'. */
+static void cell_of(const float *p, double eps, int64_t c[3]) {
+  for (int k = 0; k < 3; k++) c[k] = (int64_t)floor(p[k] / eps);
+}
+
+static uint64_t cell_hash(const int64_t c[3]) {
+  uint64_t h = u64_mix((uint64_t)c[0] * 0x9e3779b97f4a7c15ull);
+  h = u64_mix(h ^ (uint64_t)c[1]);
+  return u64_mix(h ^ (uint64_t)c[2] * 0xc2b2ae3d27d4eb4full);
+}
+
+/* Per vertex of 'm': a surface holding it, its base material, and its weight (a third of the
+ * area of its triangles); -1 as the surface of a vertex without triangles. */
+static void vertex_info(const hr_mesh *m, const hr_scene *s, int32_t *vsurf, int32_t *vmat,
+                       double *vw) {
+  for (int64_t v = 0; v < m->nverts; v++) vsurf[v] = -1, vw[v] = 0;
+  for (int64_t t = 0; t < m->ntris; t++) {
+    const hr_surface *f = &s->surfs[m->tri_surf[t]];
+    double a = tri_area(m, t) / 3;
+    for (int c = 0; c < 3; c++) {
+      uint32_t v = m->tri[3 * t + c];
+      vsurf[v] = m->tri_surf[t];
+      vmat[v] = s->mats[f->material].base;
+      vw[v] += a > 0 ? a : 1e-300;
+    }
+  }
+}
+
+/* Joins (union-find 'par') every vertex with the vertices within 'eps' of it (max norm) that
+ * belong to another polygon with the same input material and a normal within SMOOTH_COS. The
+ * grid cells hold the vertices in chains 'next' from 'head' (open addressing on 'ckey'). */
+static void join_close(const hr_mesh *m, const hr_scene *s, const int32_t *vsurf,
+                       const int32_t *vmat, double eps, const int64_t *ckey, const int64_t *head,
+                       uint64_t mask, const int64_t *next, int64_t *par) {
+  for (int64_t v = 0; v < m->nverts; v++) {
+    if (vsurf[v] < 0) continue;
+    const float *p = &m->pos[3 * v];
+    const hr_surface *fv = &s->surfs[vsurf[v]];
+    int64_t c0[3];
+    cell_of(p, eps, c0);
+    for (int d = 0; d < 27; d++) {
+      int64_t c[3] = {c0[0] + d % 3 - 1, c0[1] + d / 3 % 3 - 1, c0[2] + d / 9 - 1};
+      uint64_t i = cell_hash(c) & mask;
+      while (head[i] >= 0 && memcmp(&ckey[3 * i], c, sizeof c)) i = (i + 1) & mask;
+      for (int64_t w = head[i]; w >= 0; w = next[w]) {
+        if (w <= v || vmat[w] != vmat[v]) continue;
+        const hr_surface *fw = &s->surfs[vsurf[w]];
+        if (fw->poly == fv->poly || v3_dot(fv->normal, fw->normal) < SMOOTH_COS) continue;
+        const float *q = &m->pos[3 * w];
+        if (fabs(p[0] - q[0]) > eps || fabs(p[1] - q[1]) > eps || fabs(p[2] - q[2]) > eps)
+          continue;
+        int64_t a = uf_find(par, v), b = uf_find(par, w);
+        if (a != b) par[a < b ? b : a] = a < b ? a : b;
+      }
+    }
+  }
+}
+
+/* Two vertices closer than this are one point: a millionth of the scene's size, or a few float
+ * steps of its largest coordinate (the mesh stores floats), whichever is larger. */
+static double merge_eps(const hr_mesh *m) {
+  float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  double amax = 0;
+  for (int64_t v = 0; v < m->nverts; v++)
+    for (int c = 0; c < 3; c++) {
+      float x = m->pos[3 * v + c];
+      lo[c] = x < lo[c] ? x : lo[c];
+      hi[c] = x > hi[c] ? x : hi[c];
+      amax = fabs(x) > amax ? fabs(x) : amax;
+    }
+  double d = sqrt(pow(hi[0] - lo[0], 2) + pow(hi[1] - lo[1], 2) + pow(hi[2] - lo[2], 2));
+  double e = fmax(1e-6 * d, 8 * FLT_EPSILON * amax);
+  return e > 0 && isfinite(e) ? e : 1;
+}
+
+/* Smooth shading across polygons (real models arrive as triangle soups: a wall of many
+ * triangles): vertices of different polygons at one position (within merge_eps), with the same
+ * input material and parallel normals (SMOOTH_COS) all get the weighted mean of their values.
+ * Vertices stay separate (each polygon keeps its own); creases, other materials and back-to-back
+ * panels keep their own values. O(nverts) expected. */
+static hr_status smooth_across(hr_mesh *m, const hr_scene *s) {
+  if (m->nverts <= 0 || s->npolys < 2) return HR_OK;
+  int64_t n = m->nverts, cap = 16;
+  while (cap < 2 * n) cap *= 2;
+  int32_t *vsurf = malloc((size_t)n * sizeof *vsurf), *vmat = malloc((size_t)n * sizeof *vmat);
+  double *vw = malloc((size_t)n * sizeof *vw), *acc = malloc((size_t)n * 4 * sizeof *acc);
+  int64_t *par = malloc((size_t)n * sizeof *par), *next = malloc((size_t)n * sizeof *next);
+  int64_t *head = malloc((size_t)cap * sizeof *head), *ckey = malloc((size_t)cap * 3 * sizeof *ckey);
+  hr_status st = HR_ERR_NOMEM;
+  if (!vsurf || !vmat || !vw || !acc || !par || !next || !head || !ckey) goto out;
+  vertex_info(m, s, vsurf, vmat, vw);
+  double eps = merge_eps(m);
+  uint64_t mask = (uint64_t)cap - 1;
+  for (int64_t i = 0; i < cap; i++) head[i] = -1;
+  for (int64_t v = 0; v < n; v++) {
+    par[v] = v;
+    next[v] = -1;
+    if (vsurf[v] < 0) continue;
+    int64_t c[3];
+    cell_of(&m->pos[3 * v], eps, c);
+    uint64_t i = cell_hash(c) & mask;
+    while (head[i] >= 0 && memcmp(&ckey[3 * i], c, sizeof c)) i = (i + 1) & mask;
+    memcpy(&ckey[3 * i], c, sizeof c);
+    next[v] = head[i];
+    head[i] = v;
+  }
+  join_close(m, s, vsurf, vmat, eps, ckey, head, mask, next, par);
+  memset(acc, 0, (size_t)n * 4 * sizeof *acc);
+  for (int64_t v = 0; v < n; v++) {
+    int64_t r = uf_find(par, v);
+    for (int c = 0; c < 3; c++) acc[4 * r + c] += vw[v] * m->B[3 * v + c];
+    acc[4 * r + 3] += vw[v];
+  }
+  for (int64_t v = 0; v < n; v++) {
+    int64_t r = uf_find(par, v);
+    if (r != v || acc[4 * r + 3] != vw[v]) /* joined with others */
+      for (int c = 0; c < 3; c++) m->B[3 * v + c] = (float)(acc[4 * r + c] / acc[4 * r + 3]);
+  }
+  st = HR_OK;
+out:
+  free(vsurf);
+  free(vmat);
+  free(vw);
+  free(acc);
+  free(par);
+  free(next);
+  free(head);
+  free(ckey);
+  return st;
+}
+
 void hr_mesh_destroy(hr_mesh **pm) {
   if (!pm || !*pm) return;
   hr_mesh *m = *pm;
@@ -627,6 +773,7 @@ hr_status hr_mesh_build(const hr_scene *s, const hr_leaf *leaves, int64_t n, hr_
     r0 = r1;
   }
 #undef POLY_OF
+  if (st == HR_OK) st = smooth_across(m, s);
   if (st == HR_OK) {
     /* trim */
     if (m->nverts > 0) {
