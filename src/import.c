@@ -15,9 +15,10 @@
  *  - materials: one scene material per assimp material, in file order, named after it
  *    ("material N" when unnamed; "NAME#N" when the name repeats). Reflectance: the base colour
  *    (glTF baseColorFactor) or the diffuse colour (3DS, FBX, Collada, MTL), grey 0.5 when there
- *    is none, clamped to [0, 1] with a warning. Emission: the emissive colour times
- *    $mat.emissiveIntensity (KHR_materials_emissive_strength in glTF); channels below 1e-30 are 0,
- *    above 1e30 or not finite an error.
+ *    is none, clamped to [0, 1] with a warning. Emission: the emissive colour times the glTF
+ *    KHR_materials_emissive_strength (assimp 5.2.5 drops it: gltfext.c reads it from the JSON;
+ *    a later assimp's $mat.emissiveIntensity wins); channels below 1e-30 are 0, above 1e30 or
+ *    not finite an error. Materials no mesh uses (assimp's added default) are left out.
  *  - textures: a material with a diffuse (base colour) texture and texture coordinates gives
  *    each polygon the mean of the texture over the polygon's UV footprint (texture.c; sRGB
  *    decoded to linear, alpha ignored, the texture repeating), times the colour factor, as a
@@ -27,6 +28,7 @@
  *    factor alone.
  * assimp keeps its messages in a global string: imports are serialised by a mutex. */
 #include "hrad.h"
+#include "gltfext.h"
 #include "texture.h"
 
 #include <assimp/cimport.h>
@@ -68,6 +70,7 @@ typedef struct imp_ctx {
   int *mat_of;        /* assimp material -> scene material */
   int *tex_of;        /* assimp material -> texture slot or -1 */
   unsigned *uv_of;    /* assimp material -> UV channel of its diffuse texture */
+  double *strength;   /* assimp material -> glTF emissive strength (1 for other formats) */
   tex_slot *tex;
   int ntex;
   hr_vec3 *poly;      /* scratch: one face's world positions */
@@ -303,14 +306,15 @@ static void material_name(imp_ctx *c, unsigned i, char *out, size_t n) {
 }
 
 /* Emission of 'm': the emissive colour times the emissive intensity, checked. */
-static hr_status material_emit(imp_ctx *c, const struct aiMaterial *m, const char *name,
-                               double e[3]) {
+static hr_status material_emit(imp_ctx *c, unsigned idx, const char *name, double e[3]) {
+  const struct aiMaterial *m = c->ai->mMaterials[idx];
   e[0] = e[1] = e[2] = 0;
   mat_color(m, AI_MATKEY_COLOR_EMISSIVE, e);
-  ai_real k = 1;
+  ai_real ki = 1;
   unsigned one = 1;
-  if (aiGetMaterialFloatArray(m, AI_MATKEY_EMISSIVE_INTENSITY, &k, &one) != aiReturn_SUCCESS)
-    k = 1;
+  double k = c->strength[idx];
+  if (aiGetMaterialFloatArray(m, AI_MATKEY_EMISSIVE_INTENSITY, &ki, &one) == aiReturn_SUCCESS)
+    k = ki; /* assimp 5.3 and later read the extension themselves */
   for (int ch = 0; ch < 3; ch++) {
     e[ch] *= k;
     if (!(e[ch] >= 0 && e[ch] <= EMIT_MAX))
@@ -365,28 +369,53 @@ static hr_status material_texture(imp_ctx *c, unsigned i) {
   return HR_OK;
 }
 
+static hr_status add_material(imp_ctx *c, unsigned i);
+
+/* Adds the materials that some mesh uses (assimp adds a default one that may be unused), in
+ * file order. */
 static hr_status add_materials(imp_ctx *c) {
   unsigned n = c->ai->mNumMaterials;
   c->mat_of = malloc((n ? n : 1) * sizeof *c->mat_of);
   c->tex_of = malloc((n ? n : 1) * sizeof *c->tex_of);
   c->uv_of = malloc((n ? n : 1) * sizeof *c->uv_of);
-  if (!c->mat_of || !c->tex_of || !c->uv_of)
+  c->strength = malloc((n ? n : 1) * sizeof *c->strength);
+  if (!c->mat_of || !c->tex_of || !c->uv_of || !c->strength)
     return hr_err_set(c->err, HR_ERR_NOMEM, "%s: out of memory", c->path);
-  for (unsigned i = 0; i < n; i++) {
-    const struct aiMaterial *m = c->ai->mMaterials[i];
-    char name[NAME_MAX_LEN + 16];
-    material_name(c, i, name, sizeof name);
-    double rho[3], e[3];
-    hr_status st = material_rho(c, m, name, rho);
-    if (st == HR_OK) st = material_emit(c, m, name, e);
-    if (st == HR_OK) st = material_texture(c, i);
-    if (st != HR_OK) return st;
-    if (hr_scene_add_material(c->s, name, rho, e, &c->mat_of[i]) != HR_OK)
-      return hr_err_set(c->err, HR_ERR_NOMEM, "%s: out of memory", c->path);
+  char ext[16];
+  ext_of(c->path, ext, sizeof ext);
+  for (unsigned i = 0; i < n; i++) c->strength[i] = 1;
+  if (!strcmp(ext, "gltf") || !strcmp(ext, "glb")) hr_gltf_emissive_strength(c->path, c->strength, n);
+  char *used = calloc(n ? n : 1, 1);
+  if (!used) return hr_err_set(c->err, HR_ERR_NOMEM, "%s: out of memory", c->path);
+  for (unsigned i = 0; i < c->ai->mNumMeshes; i++)
+    if (c->ai->mMeshes[i]->mMaterialIndex < n) used[c->ai->mMeshes[i]->mMaterialIndex] = 1;
+  hr_status st = HR_OK;
+  for (unsigned i = 0; i < n && st == HR_OK; i++) {
+    c->mat_of[i] = -1;
+    c->tex_of[i] = -1;
+    c->uv_of[i] = 0;
+    if (used[i]) st = add_material(c, i);
   }
+  free(used);
+  if (st != HR_OK) return st;
   if (c->nclamped)
     hr_log_warn(c->log, "%s: %ld colour channel%s outside [0, 1] clamped to reflectance 0 or 1",
                 c->path, c->nclamped, c->nclamped > 1 ? "s" : "");
+  return HR_OK;
+}
+
+/* Adds assimp material 'i' to the scene (c->mat_of[i]) with its texture slot. */
+static hr_status add_material(imp_ctx *c, unsigned i) {
+  const struct aiMaterial *m = c->ai->mMaterials[i];
+  char name[NAME_MAX_LEN + 16];
+  material_name(c, i, name, sizeof name);
+  double rho[3], e[3];
+  hr_status st = material_rho(c, m, name, rho);
+  if (st == HR_OK) st = material_emit(c, i, name, e);
+  if (st == HR_OK) st = material_texture(c, i);
+  if (st != HR_OK) return st;
+  if (hr_scene_add_material(c->s, name, rho, e, &c->mat_of[i]) != HR_OK)
+    return hr_err_set(c->err, HR_ERR_NOMEM, "%s: out of memory", c->path);
   return HR_OK;
 }
 
@@ -596,6 +625,7 @@ hr_status hr_scene_import(const char *path, const hr_log *log, hr_scene **out, h
   free(c.mat_of);
   free(c.tex_of);
   free(c.uv_of);
+  free(c.strength);
   free(c.poly);
   free(c.uv);
   if (st != HR_OK) {
