@@ -1188,12 +1188,14 @@ static void check_white(const cli *c) {
   if (c->quiet) return;
   char *used = calloc((size_t)sc->nmats, 1);
   if (!used) return;
-  for (int i = 0; i < sc->nsurfs; i++) used[sc->surfs[i].material] = 1;
+  for (int i = 0; i < sc->nsurfs; i++) { /* a textured polygon's variant counts for its base */
+    const hr_material *mt = &sc->mats[sc->surfs[i].material];
+    if (fmax(mt->rho[0], fmax(mt->rho[1], mt->rho[2])) >= RHO_WARN) used[mt->base] = 1;
+  }
   char names[200] = "";
   int n = 0;
   for (int m = 0; m < sc->nmats; m++) {
-    const double *r = sc->mats[m].rho;
-    if (!used[m] || fmax(r[0], fmax(r[1], r[2])) < RHO_WARN) continue;
+    if (!used[m]) continue;
     if (n++ < 4)
       snprintf(names + strlen(names), sizeof names - strlen(names), "%s'%.40s'", n > 1 ? ", " : "",
                sc->mats[m].name);
