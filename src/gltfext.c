@@ -4,6 +4,7 @@
  * emissiveStrength; anything malformed leaves the strengths at 1 (assimp reports the error). */
 #include "gltfext.h"
 
+#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -15,6 +16,9 @@
 typedef struct js {
   const char *p, *end;
 } js;
+
+/* 1 if 'c' is one of the characters of 'set' (never for NUL). */
+static int in_set(char c, const char *set) { return c != '\0' && strchr(set, c) != NULL; }
 
 static void ws(js *j) {
   while (j->p < j->end && (*j->p == ' ' || *j->p == '\t' || *j->p == '\n' || *j->p == '\r'))
@@ -36,7 +40,7 @@ static int string(js *j, const char *key) {
   ws(j);
   if (j->p >= j->end || *j->p != '"') return -1;
   const char *s = ++j->p;
-  while (j->p < j->end && *j->p != '"') j->p += *j->p == '\\' ? 2 : 1;
+  while (j->p < j->end && *j->p != '"') j->p += *j->p == '\\' && j->end - j->p > 1 ? 2 : 1;
   if (j->p >= j->end) return -1;
   int eq = key && (size_t)(j->p - s) == strlen(key) && !memcmp(s, key, strlen(key));
   j->p++;
@@ -62,7 +66,7 @@ static int skip(js *j, int depth) {
   if (eat(j, '{')) return skip_items(j, '}', depth);
   if (eat(j, '[')) return skip_items(j, ']', depth);
   const char *s = j->p;
-  while (j->p < j->end && !strchr(",]} \t\r\n", *j->p)) j->p++;
+  while (j->p < j->end && !in_set(*j->p, ",]} \t\r\n")) j->p++;
   return j->p > s;
 }
 
@@ -87,14 +91,14 @@ static double strength(js j) {
   ws(&j);
   char num[64];
   size_t n = 0;
-  while (j.p < j.end && n + 1 < sizeof num && strchr("0123456789+-.eE", *j.p)) num[n++] = *j.p++;
+  while (j.p < j.end && n + 1 < sizeof num && in_set(*j.p, "0123456789+-.eE")) num[n++] = *j.p++;
   num[n] = '\0';
   char *e;
   double k = strtod(num, &e);
-  return n > 0 && *e == '\0' && k >= 0 ? k : 1;
+  return n > 0 && *e == '\0' && isfinite(k) && k >= 0 ? k : 1;
 }
 
-static void scan(const char *json, size_t len, double *k, unsigned n) {
+void hr_gltf_emissive_strength_json(const char *json, size_t len, double *k, unsigned n) {
   js j = {json, json + len};
   if (!member(&j, "materials") || !eat(&j, '[') || eat(&j, ']')) return;
   unsigned i = 0;
@@ -133,6 +137,6 @@ void hr_gltf_emissive_strength(const char *path, double *k, unsigned n) {
   size_t len;
   char *json = read_json(path, &len);
   if (!json) return;
-  scan(json, len, k, n);
+  hr_gltf_emissive_strength_json(json, len, k, n);
   free(json);
 }

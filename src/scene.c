@@ -96,7 +96,9 @@ hr_status hr_scene_add_variant(hr_scene *s, int base, const double rho[3], int *
   if (base < 0 || base >= s->nmats) return HR_ERR_INVALID;
   base = s->mats[base].base;
   int k;
-  hr_status st = hr_scene_add_material(s, s->mats[base].name, rho, s->mats[base].emit, &k);
+  double emit[3]; /* a copy: adding may move s->mats */
+  memcpy(emit, s->mats[base].emit, sizeof emit);
+  hr_status st = hr_scene_add_material(s, s->mats[base].name, rho, emit, &k);
   if (st != HR_OK) return st;
   s->mats[k].base = base;
   if (idx) *idx = k;

@@ -153,6 +153,18 @@ static inline void fuzz_check_scene(const hr_scene *s) {
   FUZZ_REQUIRE(next == s->npolys, "%d solved input records for %d polygons", next, s->npolys);
   for (int p = 0; p < s->npolys; p++)
     FUZZ_REQUIRE(hr_scene_poly_input(s, p) >= 0, "polygon %d has no input row", p);
+  /* objects: every kept polygon in one, every object named, names distinct */
+  FUZZ_REQUIRE(s->nobjects >= 1, "%d objects for %d polygons", s->nobjects, s->npolys);
+  for (int p = 0; p < s->npolys; p++) {
+    int o = hr_scene_poly_object(s, p);
+    FUZZ_REQUIRE(o >= 0 && o < s->nobjects, "polygon %d in object %d of %d", p, o, s->nobjects);
+  }
+  for (int o = 0; o < s->nobjects; o++)
+    for (int q = o + 1; q < s->nobjects && q < o + 64; q++)
+      FUZZ_REQUIRE(strcmp(hr_scene_object_name(s, o), hr_scene_object_name(s, q)) != 0,
+                   "objects %d and %d share a name", o, q);
+  for (int m = 0; m < s->nmats; m++)
+    FUZZ_REQUIRE(s->mats[m].base == m, "OBJ material %d is a variant of %d", m, s->mats[m].base);
 }
 
 /* Checks the outcome of one parse of OBJ text 'obj' (olen bytes): the scene after HR_OK (and one
