@@ -609,7 +609,8 @@ static void vertex_info(const hr_mesh *m, const hr_scene *s, int32_t *vsurf, int
 
 /* Joins (union-find 'par') every vertex with the vertices within 'eps' of it (max norm) that
  * belong to another polygon with the same input material and a normal within SMOOTH_COS. The
- * grid cells hold the vertices in chains 'next' from 'head' (open addressing on 'ckey'). */
+ * grid cells (side 2 eps: the box of +-eps around a vertex meets at most 2 per axis) hold the
+ * vertices in chains 'next' from 'head' (open addressing on 'ckey'). */
 static void join_close(const hr_mesh *m, const hr_scene *s, const int32_t *vsurf,
                        const int32_t *vmat, double eps, const int64_t *ckey, const int64_t *head,
                        uint64_t mask, const int64_t *next, int64_t *par) {
@@ -617,23 +618,27 @@ static void join_close(const hr_mesh *m, const hr_scene *s, const int32_t *vsurf
     if (vsurf[v] < 0) continue;
     const float *p = &m->pos[3 * v];
     const hr_surface *fv = &s->surfs[vsurf[v]];
-    int64_t c0[3];
-    cell_of(p, eps, c0);
-    for (int d = 0; d < 27; d++) {
-      int64_t c[3] = {c0[0] + d % 3 - 1, c0[1] + d / 3 % 3 - 1, c0[2] + d / 9 - 1};
-      uint64_t i = cell_hash(c) & mask;
-      while (head[i] >= 0 && memcmp(&ckey[3 * i], c, sizeof c)) i = (i + 1) & mask;
-      for (int64_t w = head[i]; w >= 0; w = next[w]) {
-        if (w <= v || vmat[w] != vmat[v]) continue;
-        const hr_surface *fw = &s->surfs[vsurf[w]];
-        if (fw->poly == fv->poly || v3_dot(fv->normal, fw->normal) < SMOOTH_COS) continue;
-        const float *q = &m->pos[3 * w];
-        if (fabs(p[0] - q[0]) > eps || fabs(p[1] - q[1]) > eps || fabs(p[2] - q[2]) > eps)
-          continue;
-        int64_t a = uf_find(par, v), b = uf_find(par, w);
-        if (a != b) par[a < b ? b : a] = a < b ? a : b;
-      }
+    int64_t lo[3], hi[3], c[3];
+    for (int k = 0; k < 3; k++) {
+      lo[k] = (int64_t)floor((p[k] - eps) / (2 * eps));
+      hi[k] = (int64_t)floor((p[k] + eps) / (2 * eps));
     }
+    for (c[0] = lo[0]; c[0] <= hi[0]; c[0]++)
+      for (c[1] = lo[1]; c[1] <= hi[1]; c[1]++)
+        for (c[2] = lo[2]; c[2] <= hi[2]; c[2]++) {
+          uint64_t i = cell_hash(c) & mask;
+          while (head[i] >= 0 && memcmp(&ckey[3 * i], c, sizeof c)) i = (i + 1) & mask;
+          for (int64_t w = head[i]; w >= 0; w = next[w]) {
+            if (w <= v || vmat[w] != vmat[v]) continue;
+            const hr_surface *fw = &s->surfs[vsurf[w]];
+            if (fw->poly == fv->poly || v3_dot(fv->normal, fw->normal) < SMOOTH_COS) continue;
+            const float *q = &m->pos[3 * w];
+            if (fabs(p[0] - q[0]) > eps || fabs(p[1] - q[1]) > eps || fabs(p[2] - q[2]) > eps)
+              continue;
+            int64_t a = uf_find(par, v), b = uf_find(par, w);
+            if (a != b) par[a < b ? b : a] = a < b ? a : b;
+          }
+        }
   }
 }
 
@@ -678,7 +683,7 @@ static hr_status smooth_across(hr_mesh *m, const hr_scene *s) {
     next[v] = -1;
     if (vsurf[v] < 0) continue;
     int64_t c[3];
-    cell_of(&m->pos[3 * v], eps, c);
+    cell_of(&m->pos[3 * v], 2 * eps, c);
     uint64_t i = cell_hash(c) & mask;
     while (head[i] >= 0 && memcmp(&ckey[3 * i], c, sizeof c)) i = (i + 1) & mask;
     memcpy(&ckey[3 * i], c, sizeof c);
