@@ -40,6 +40,7 @@
 #include <errno.h>
 #include <math.h>
 #include <pthread.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -76,6 +77,8 @@ typedef struct imp_ctx {
   hr_vec3 *poly;      /* scratch: one face's world positions */
   double (*uv)[2];    /* and texture coordinates */
   unsigned cap_poly;
+  int *vtab;          /* the variants made so far (variant_of) */
+  size_t cap_vtab, nvariants;
   long ndegen, nskipped, nclamped;
   int objects_made;
 } imp_ctx;
@@ -452,6 +455,52 @@ static void face_tex_mean(const imp_ctx *c, const hr_texture *t, unsigned n, dou
   for (int ch = 0; ch < 3; ch++) out[ch] = wsum > 0 ? sum[ch] / wsum : first[ch];
 }
 
+static size_t variant_hash(int base, const double rho[3]) {
+  uint64_t h = (uint64_t)base * 0x9e3779b97f4a7c15ull;
+  for (int k = 0; k < 3; k++) {
+    uint64_t u;
+    memcpy(&u, &rho[k], sizeof u);
+    h = (h ^ u) * 0xff51afd7ed558ccdull;
+    h ^= h >> 33;
+  }
+  return (size_t)h;
+}
+
+/* Material 'base' with reflectance 'rho' (rounded to float: polygons of one colour share it):
+ * an earlier variant with exactly that reflectance, or a new one. The variants are found through
+ * an open-addressing table of their indices (c->vtab, kept at most half full). */
+static hr_status variant_of(imp_ctx *c, int base, const double rho[3], int *mat) {
+  if (2 * (c->nvariants + 1) > c->cap_vtab) {
+    size_t cap = c->cap_vtab ? 2 * c->cap_vtab : 1024;
+    int *t = malloc(cap * sizeof *t);
+    if (!t) return hr_err_set(c->err, HR_ERR_NOMEM, "%s: out of memory", c->path);
+    for (size_t i = 0; i < cap; i++) t[i] = -1;
+    for (size_t i = 0; i < c->cap_vtab; i++) /* rehash */
+      if (c->vtab[i] >= 0) {
+        const hr_material *v = &c->s->mats[c->vtab[i]];
+        size_t h = variant_hash(v->base, v->rho) & (cap - 1);
+        while (t[h] >= 0) h = (h + 1) & (cap - 1);
+        t[h] = c->vtab[i];
+      }
+    free(c->vtab);
+    c->vtab = t;
+    c->cap_vtab = cap;
+  }
+  size_t h = variant_hash(base, rho) & (c->cap_vtab - 1);
+  for (; c->vtab[h] >= 0; h = (h + 1) & (c->cap_vtab - 1)) {
+    const hr_material *v = &c->s->mats[c->vtab[h]];
+    if (v->base == base && !memcmp(v->rho, rho, sizeof v->rho)) {
+      *mat = c->vtab[h];
+      return HR_OK;
+    }
+  }
+  if (hr_scene_add_variant(c->s, base, rho, mat) != HR_OK)
+    return hr_err_set(c->err, HR_ERR_NOMEM, "%s: out of memory", c->path);
+  c->vtab[h] = *mat;
+  c->nvariants++;
+  return HR_OK;
+}
+
 /* The material of one face: the mesh's, or a variant with the texture's mean. */
 static hr_status face_material(imp_ctx *c, const struct aiMesh *mesh, unsigned n, int *mat) {
   unsigned mi = mesh->mMaterialIndex;
@@ -462,11 +511,9 @@ static hr_status face_material(imp_ctx *c, const struct aiMesh *mesh, unsigned n
   face_tex_mean(c, &c->tex[slot].tex, n, m);
   for (int ch = 0; ch < 3; ch++) {
     rho[ch] = c->s->mats[*mat].rho[ch] * m[ch];
-    rho[ch] = rho[ch] < 0 ? 0 : rho[ch] > 1 ? 1 : rho[ch];
+    rho[ch] = rho[ch] < 0 ? 0 : rho[ch] > 1 ? 1 : (double)(float)rho[ch];
   }
-  if (hr_scene_add_variant(c->s, *mat, rho, mat) != HR_OK)
-    return hr_err_set(c->err, HR_ERR_NOMEM, "%s: out of memory", c->path);
-  return HR_OK;
+  return variant_of(c, *mat, rho, mat);
 }
 
 /* Adds face 'f' of 'mesh' under world transform 't' ('flip': reverse the order). */
@@ -626,6 +673,7 @@ hr_status hr_scene_import(const char *path, const hr_log *log, hr_scene **out, h
   free(c.tex_of);
   free(c.uv_of);
   free(c.strength);
+  free(c.vtab);
   free(c.poly);
   free(c.uv);
   if (st != HR_OK) {
