@@ -387,7 +387,8 @@ static hr_status add_materials(imp_ctx *c) {
   char ext[16];
   ext_of(c->path, ext, sizeof ext);
   for (unsigned i = 0; i < n; i++) c->strength[i] = 1;
-  if (!strcmp(ext, "gltf") || !strcmp(ext, "glb")) hr_gltf_emissive_strength(c->path, c->strength, n);
+  if (!strcmp(ext, "gltf") || !strcmp(ext, "glb"))
+    hr_gltf_emissive_strength(c->path, c->strength, n);
   char *used = calloc(n ? n : 1, 1);
   if (!used) return hr_err_set(c->err, HR_ERR_NOMEM, "%s: out of memory", c->path);
   for (unsigned i = 0; i < c->ai->mNumMeshes; i++)

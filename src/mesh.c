@@ -671,7 +671,8 @@ static hr_status smooth_across(hr_mesh *m, const hr_scene *s) {
   int32_t *vsurf = malloc((size_t)n * sizeof *vsurf), *vmat = malloc((size_t)n * sizeof *vmat);
   double *vw = malloc((size_t)n * sizeof *vw), *acc = malloc((size_t)n * 4 * sizeof *acc);
   int64_t *par = malloc((size_t)n * sizeof *par), *next = malloc((size_t)n * sizeof *next);
-  int64_t *head = malloc((size_t)cap * sizeof *head), *ckey = malloc((size_t)cap * 3 * sizeof *ckey);
+  int64_t *head = malloc((size_t)cap * sizeof *head);
+  int64_t *ckey = malloc((size_t)cap * 3 * sizeof *ckey);
   hr_status st = HR_ERR_NOMEM;
   if (!vsurf || !vmat || !vw || !acc || !par || !next || !head || !ckey) goto out;
   vertex_info(m, s, vsurf, vmat, vw);
@@ -1186,10 +1187,14 @@ static void glb_json(sbuf *j, const hr_mesh *m, const glayout *g, double exposur
   size_t binlen = 3 * npos + nidx;
   sb_printf(j,
             "],\"buffers\":[{\"byteLength\":%zu}],\"bufferViews\":["
-            "{\"buffer\":0,\"byteOffset\":0,\"byteLength\":%zu,\"byteStride\":12,\"target\":34962},"
-            "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"byteStride\":12,\"target\":34962},"
-            "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"byteStride\":12,\"target\":34962},"
-            "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"target\":34963}],\"accessors\":[",
+            "{\"buffer\":0,\"byteOffset\":0,\"byteLength\":%zu,\"byteStride\":12,"
+            "\"target\":34962},"
+            "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"byteStride\":12,"
+            "\"target\":34962},"
+            "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"byteStride\":12,"
+            "\"target\":34962},"
+            "{\"buffer\":0,\"byteOffset\":%zu,\"byteLength\":%zu,\"target\":34963}],"
+            "\"accessors\":[",
             binlen, npos, npos, npos, 2 * npos, npos, 3 * npos, nidx);
   for (int i = 0; i < g->nprim; i++) {
     const gprim *p = &g->prim[i];

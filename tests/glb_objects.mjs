@@ -58,5 +58,6 @@ for (const node of gltf.nodes) {
   }
 }
 for (const [key, s] of sums)
-  console.log(`${key} ${s[0].toPrecision(6)} ` + [1, 2, 3].map((c) => (s[c] / s[0]).toPrecision(7)).join(' '));
+  console.log(`${key} ${s[0].toPrecision(6)} ` +
+              [1, 2, 3].map((c) => (s[c] / s[0]).toPrecision(7)).join(' '));
 console.log(finite ? `max ${max.map((x) => x.toPrecision(7)).join(' ')}` : 'max nan nan nan');

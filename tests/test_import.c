@@ -172,7 +172,8 @@ static void test_textured(void) {
     /* the triangle's centroid tells which one it is: u < v (upper) has 3/4 of its area at
      * u < 0.5, the other 1/4 */
     const hr_surface *f = &s->surfs[p];
-    double cx = (f->v[0].x + f->v[1].x + f->v[2].x) / 3, cz = (f->v[0].z + f->v[1].z + f->v[2].z) / 3;
+    double cx = (f->v[0].x + f->v[1].x + f->v[2].x) / 3;
+    double cz = (f->v[0].z + f->v[1].z + f->v[2].z) / 3;
     double white = cx < cz ? 0.75 : 0.25, want = 0.8 * (white + (1 - white) * grey);
     CHECK(fabs(m->rho[0] - want) < 0.01 * want && m->base == hr_scene_material_at(s, 0) &&
               !strcmp(m->name, "painted"),
