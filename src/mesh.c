@@ -659,6 +659,124 @@ static double merge_eps(const hr_mesh *m) {
   return e > 0 && isfinite(e) ? e : 1;
 }
 
+/* A surface edge for finding edges shared by two polygons: its ends in a fixed order. */
+typedef struct sedge {
+  hr_vec3 a, b;
+  int surf;
+} sedge;
+
+static int cmp_v3(hr_vec3 p, hr_vec3 q) {
+  if (p.x != q.x) return p.x < q.x ? -1 : 1;
+  if (p.y != q.y) return p.y < q.y ? -1 : 1;
+  if (p.z != q.z) return p.z < q.z ? -1 : 1;
+  return 0;
+}
+
+static int cmp_sedge(const void *pa, const void *pb) {
+  const sedge *x = pa, *y = pb;
+  int c = cmp_v3(x->a, y->a);
+  if (!c) c = cmp_v3(x->b, y->b);
+  return c ? c : (x->surf > y->surf) - (x->surf < y->surf);
+}
+
+/* A vertex on a shared edge: its parameter along the edge, index and value. */
+typedef struct evert {
+  double t;
+  int64_t v;
+} evert;
+
+static int cmp_evert(const void *pa, const void *pb) {
+  double a = ((const evert *)pa)->t, b = ((const evert *)pb)->t;
+  return (a > b) - (a < b);
+}
+
+/* The vertices of polygon 'poly' (CSR 'pstart'/'pverts') on segment a-b, sorted by parameter. */
+static int64_t on_edge(const hr_mesh *m, const int64_t *pstart, const int64_t *pverts, int poly,
+                       hr_vec3 a, hr_vec3 b, double eps, evert *out) {
+  hr_vec3 d = v3_sub(b, a);
+  double dd = v3_dot(d, d), len = sqrt(dd);
+  int64_t k = 0;
+  for (int64_t i = pstart[poly]; i < pstart[poly + 1]; i++) {
+    const float *x = &m->pos[3 * pverts[i]];
+    hr_vec3 r = v3_sub(v3(x[0], x[1], x[2]), a);
+    double t = v3_dot(r, d) / dd;
+    if (t * len < -eps || (t - 1) * len > eps) continue;
+    if (v3_len(v3_sub(r, v3_scale(d, t))) > eps) continue;
+    out[k++] = (evert){t, pverts[i]};
+  }
+  qsort(out, (size_t)k, sizeof *out, cmp_evert);
+  return k;
+}
+
+/* Gives each vertex of list 'x' that list 'y' lacks (no vertex within 'et' in parameter) the
+ * value of y's shading there (linear between y's neighbours), written to 'nb'. */
+static void take_other_side(const hr_mesh *m, const evert *x, int64_t nx, const evert *y,
+                            int64_t ny, double et, float *nb) {
+  int64_t k = 0;
+  for (int64_t i = 0; i < nx && ny >= 2; i++) {
+    while (k + 1 < ny && y[k + 1].t <= x[i].t) k++;
+    if (fabs(y[k].t - x[i].t) <= et || (k + 1 < ny && fabs(y[k + 1].t - x[i].t) <= et)) continue;
+    if (k + 1 >= ny || y[k].t > x[i].t) continue; /* beyond y's ends */
+    double w = (x[i].t - y[k].t) / (y[k + 1].t - y[k].t);
+    for (int c = 0; c < 3; c++)
+      nb[3 * x[i].v + c] = (float)((1 - w) * m->B[3 * y[k].v + c] + w * m->B[3 * y[k + 1].v + c]);
+  }
+}
+
+/* T-vertices across polygons: where two smoothed polygons share a whole surface edge (equal end
+ * positions), the finer side's vertices along it take the coarser side's linear interpolation,
+ * as T-vertices inside one polygon do (hr_mesh_build), so the shading is continuous across the
+ * edge. The element subdivisions of both sides are dyadic along the edge, so where one side has
+ * extra vertices the other has one longer leaf edge. O(sum over shared edges of the vertices of
+ * their two polygons). */
+static hr_status smooth_edges(hr_mesh *m, const hr_scene *s, const int32_t *vsurf, double eps) {
+  int64_t n = m->nverts, ne = 0, np = s->npolys;
+  sedge *e = malloc((size_t)s->nsurfs * 4 * sizeof *e + 1);
+  int64_t *pstart = calloc((size_t)np + 2, sizeof *pstart), *pverts = malloc((size_t)n * 8 + 8);
+  evert *ea = malloc((size_t)n * sizeof *ea + 1), *eb = malloc((size_t)n * sizeof *eb + 1);
+  float *nb = malloc((size_t)n * 3 * sizeof *nb + 1);
+  hr_status st = HR_ERR_NOMEM;
+  if (!e || !pstart || !pverts || !ea || !eb || !nb) goto out;
+  for (int i = 0; i < s->nsurfs; i++)
+    for (int k = 0; k < s->surfs[i].nverts; k++) {
+      hr_vec3 a = s->surfs[i].v[k], b = s->surfs[i].v[(k + 1) % s->surfs[i].nverts];
+      e[ne++] = cmp_v3(a, b) < 0 ? (sedge){a, b, i} : (sedge){b, a, i};
+    }
+  qsort(e, (size_t)ne, sizeof *e, cmp_sedge);
+  for (int64_t v = 0; v < n; v++) /* vertices by polygon */
+    if (vsurf[v] >= 0) pstart[s->surfs[vsurf[v]].poly + 1]++;
+  for (int64_t p = 0; p < np; p++) pstart[p + 1] += pstart[p];
+  for (int64_t v = 0; v < n; v++)
+    if (vsurf[v] >= 0) pverts[pstart[s->surfs[vsurf[v]].poly]++] = v;
+  for (int64_t p = np; p > 0; p--) pstart[p] = pstart[p - 1];
+  pstart[0] = 0;
+  memcpy(nb, m->B, (size_t)n * 3 * sizeof *nb);
+  for (int64_t i = 0; i + 1 < ne; i++) {
+    const sedge *x = &e[i], *y = &e[i + 1];
+    if (cmp_v3(x->a, y->a) || cmp_v3(x->b, y->b)) continue;
+    const hr_surface *fx = &s->surfs[x->surf], *fy = &s->surfs[y->surf];
+    if (fx->poly == fy->poly || s->mats[fx->material].base != s->mats[fy->material].base ||
+        v3_dot(fx->normal, fy->normal) < SMOOTH_COS)
+      continue;
+    double len = v3_len(v3_sub(x->b, x->a));
+    if (!(len > 2 * eps)) continue;
+    int64_t na = on_edge(m, pstart, pverts, fx->poly, x->a, x->b, eps, ea);
+    int64_t nbv = on_edge(m, pstart, pverts, fy->poly, x->a, x->b, eps, eb);
+    take_other_side(m, ea, na, eb, nbv, eps / len, nb);
+    take_other_side(m, eb, nbv, ea, na, eps / len, nb);
+  }
+  memcpy(m->B, nb, (size_t)n * 3 * sizeof *nb);
+  st = HR_OK;
+out:
+  free(e);
+  free(pstart);
+  free(pverts);
+  free(ea);
+  free(eb);
+  free(nb);
+  return st;
+}
+
 /* Smooth shading across polygons (real models arrive as triangle soups: a wall of many
  * triangles): vertices of different polygons at one position (within merge_eps), with the same
  * input material and parallel normals (SMOOTH_COS) all get the weighted mean of their values.
@@ -703,7 +821,7 @@ static hr_status smooth_across(hr_mesh *m, const hr_scene *s) {
     if (r != v || acc[4 * r + 3] != vw[v]) /* joined with others */
       for (int c = 0; c < 3; c++) m->B[3 * v + c] = (float)(acc[4 * r + c] / acc[4 * r + 3]);
   }
-  st = HR_OK;
+  st = smooth_edges(m, s, vsurf, eps);
 out:
   free(vsurf);
   free(vmat);

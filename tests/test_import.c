@@ -220,7 +220,7 @@ static hr_scene *soup_scene(void) {
   hr_scene_add_material(s, "grey", grey, black, &mg);
   hr_scene_add_material(s, "lamp", black, e, &ml);
   hr_poly_result r;
-  hr_vec3 c = {1, 0, 1}, q[4] = {{0, 0, 0}, {0, 0, 2}, {2, 0, 2}, {2, 0, 0}};
+  hr_vec3 c = {0.3, 0, 0.5}, q[4] = {{0, 0, 0}, {0, 0, 2}, {2, 0, 2}, {2, 0, 0}};
   hr_scene_begin_object(s, "floor");
   for (int i = 0; i < 4; i++) {
     hr_vec3 t[3] = {q[i], q[(i + 1) % 4], c};
@@ -233,6 +233,47 @@ static hr_scene *soup_scene(void) {
   hr_vec3 l[4] = {{0.8, 1.5, 0.8}, {1.2, 1.5, 0.8}, {1.2, 1.5, 1.2}, {0.8, 1.5, 1.2}};
   hr_scene_add_polygon(s, l, 4, ml, &r);
   return s;
+}
+
+/* Largest jump of the red channel across the shared edge from P to Q (floor corner and centre)
+ * between the triangles of the soup on either side (polygons 'pa', 'pb'): each side's shading
+ * along the edge is linear between its own vertices on it; both are sampled at every vertex of
+ * either side. */
+static double edge_jump(const hr_mesh *m, const int *vp, int pa, int pb, const float P[3],
+                        const float Q[3]) {
+  enum { MAXV = 4096 };
+  static double t[2][MAXV], val[2][MAXV];
+  int n[2] = {0, 0};
+  double d[3] = {Q[0] - P[0], Q[1] - P[1], Q[2] - P[2]}, dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+  for (int64_t v = 0; v < m->nverts; v++) {
+    int side = vp[v] == pa ? 0 : vp[v] == pb ? 1 : -1;
+    if (side < 0 || n[side] == MAXV) continue;
+    const float *x = &m->pos[3 * v];
+    double r[3] = {x[0] - P[0], x[1] - P[1], x[2] - P[2]};
+    double tt = (r[0] * d[0] + r[1] * d[1] + r[2] * d[2]) / dd, off = 0;
+    for (int k = 0; k < 3; k++) off += pow(r[k] - tt * d[k], 2);
+    if (off > 1e-12 * dd || tt < -1e-9 || tt > 1 + 1e-9) continue;
+    int i = n[side]++; /* insertion sort by t */
+    while (i > 0 && t[side][i - 1] > tt) {
+      t[side][i] = t[side][i - 1];
+      val[side][i] = val[side][i - 1];
+      i--;
+    }
+    t[side][i] = tt;
+    val[side][i] = m->B[3 * v];
+  }
+  double worst = 0;
+  for (int s = 0; s < 2; s++)
+    for (int i = 0; i < n[s]; i++) { /* side s's vertex against the other side's shading */
+      const double *ot = t[1 - s], *ov = val[1 - s];
+      int k = 1;
+      while (k < n[1 - s] - 1 && ot[k] < t[s][i]) k++;
+      if (n[1 - s] < 2) continue;
+      double w = (t[s][i] - ot[k - 1]) / (ot[k] - ot[k - 1]);
+      double other = ov[k - 1] + w * (ov[k] - ov[k - 1]);
+      worst = fmax(worst, fabs(other - val[s][i]) / fmax(fabs(val[s][i]), 1e-30));
+    }
+  return worst;
 }
 
 static void test_smooth(void) {
@@ -279,6 +320,12 @@ static void test_smooth(void) {
           (long long)crease, (long long)crease_differ);
     printf("smooth: %lld coincident floor vertex pairs equal, %lld of %lld crease pairs apart\n",
            (long long)same, (long long)crease_differ, (long long)crease);
+    /* the floor's four inner edges, from each corner to the centre */
+    const float C[3] = {0.3f, 0, 0.5f}, corner[4][3] = {{0, 0, 0}, {0, 0, 2}, {2, 0, 2}, {2, 0, 0}};
+    double jump = 0;
+    for (int i = 0; i < 4; i++) jump = fmax(jump, edge_jump(m, vp, (i + 3) % 4, i, corner[i], C));
+    printf("smooth: largest jump across the inner floor edges %.3g (relative)\n", jump);
+    CHECK(jump < 1e-5, "shading jumps by %g (relative) across a shared edge", jump);
     free(vp);
   }
   hr_mesh_destroy(&m);
