@@ -436,26 +436,6 @@ static double det3(const struct aiMatrix4x4 *t) {
          t->a3 * (t->b1 * t->c2 - t->b2 * t->c1);
 }
 
-/* Mean texture value over face 'n' vertices c->poly / c->uv (fanned, weighted by world area). */
-static void face_tex_mean(const imp_ctx *c, const hr_texture *t, unsigned n, double out[3]) {
-  double sum[3] = {0, 0, 0}, wsum = 0, first[3] = {0, 0, 0};
-  for (unsigned i = 1; i + 1 < n; i++) {
-    const double uv[3][2] = {{c->uv[0][0], c->uv[0][1]},
-                             {c->uv[i][0], c->uv[i][1]},
-                             {c->uv[i + 1][0], c->uv[i + 1][1]}};
-    double m[3];
-    hr_texture_mean_tri(t, uv, m);
-    hr_vec3 a = c->poly[0], b = c->poly[i], d = c->poly[i + 1];
-    hr_vec3 e1 = {b.x - a.x, b.y - a.y, b.z - a.z}, e2 = {d.x - a.x, d.y - a.y, d.z - a.z};
-    double w = sqrt(pow(e1.y * e2.z - e1.z * e2.y, 2) + pow(e1.z * e2.x - e1.x * e2.z, 2) +
-                    pow(e1.x * e2.y - e1.y * e2.x, 2));
-    if (i == 1) memcpy(first, m, sizeof first);
-    for (int ch = 0; ch < 3; ch++) sum[ch] += w * m[ch];
-    wsum += w;
-  }
-  for (int ch = 0; ch < 3; ch++) out[ch] = wsum > 0 ? sum[ch] / wsum : first[ch];
-}
-
 static size_t variant_hash(int base, const double rho[3]) {
   uint64_t h = (uint64_t)base * 0x9e3779b97f4a7c15ull;
   for (int k = 0; k < 3; k++) {
@@ -509,7 +489,7 @@ static hr_status face_material(imp_ctx *c, const struct aiMesh *mesh, unsigned n
   int slot = c->tex_of[mi];
   if (slot < 0 || !mesh->mTextureCoords[c->uv_of[mi]] || !tex_ready(c, slot)) return HR_OK;
   double m[3], rho[3];
-  face_tex_mean(c, &c->tex[slot].tex, n, m);
+  hr_texture_mean_poly(&c->tex[slot].tex, c->poly, (const double(*)[2])c->uv, (int)n, m);
   for (int ch = 0; ch < 3; ch++) {
     rho[ch] = c->s->mats[*mat].rho[ch] * m[ch];
     rho[ch] = rho[ch] < 0 ? 0 : rho[ch] > 1 ? 1 : (double)(float)rho[ch];

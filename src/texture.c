@@ -211,3 +211,22 @@ void hr_texture_mean_tri(const hr_texture *t, const double uv[3][2], double out[
       }
   for (int c = 0; c < 3; c++) out[c] = sum[c] / n;
 }
+
+void hr_texture_mean_poly(const hr_texture *t, const hr_vec3 *p, const double (*uv)[2], int n,
+                          double out[3]) {
+  double sum[3] = {0, 0, 0}, wsum = 0, first[3] = {0, 0, 0};
+  for (int i = 1; i + 1 < n; i++) {
+    const double tri[3][2] = {{uv[0][0], uv[0][1]}, {uv[i][0], uv[i][1]},
+                              {uv[i + 1][0], uv[i + 1][1]}};
+    double m[3];
+    hr_texture_mean_tri(t, tri, m);
+    hr_vec3 a = p[0], b = p[i], d = p[i + 1];
+    hr_vec3 e1 = {b.x - a.x, b.y - a.y, b.z - a.z}, e2 = {d.x - a.x, d.y - a.y, d.z - a.z};
+    double w = sqrt(pow(e1.y * e2.z - e1.z * e2.y, 2) + pow(e1.z * e2.x - e1.x * e2.z, 2) +
+                    pow(e1.x * e2.y - e1.y * e2.x, 2));
+    if (i == 1) memcpy(first, m, sizeof first);
+    for (int ch = 0; ch < 3; ch++) sum[ch] += w * m[ch];
+    wsum += w;
+  }
+  for (int ch = 0; ch < 3; ch++) out[ch] = wsum > 0 ? sum[ch] / wsum : first[ch];
+}

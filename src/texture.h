@@ -39,7 +39,11 @@ double hr_srgb_to_linear(unsigned v);
  * texture repeating outside [0,1]), by nearest-texel samples at the centroids of a regular
  * subdivision of the triangle into k^2 similar triangles, k about the square root of the
  * triangle's area in texels (1..64): exact for a texture constant on each sub-triangle, every
- * texel under a large triangle sampled about once. Can't fail. */
+ * texel of a small triangle sampled about once, at most 4096 samples. Can't fail. */
 void hr_texture_mean_tri(const hr_texture *t, const double uv[3][2], double out[3]);
+/* Mean of 't' over polygon 'p' (n >= 3 vertices, texture coordinates 'uv'): the fan triangles'
+ * means (hr_texture_mean_tri) weighted by their world areas. Can't fail. */
+void hr_texture_mean_poly(const hr_texture *t, const hr_vec3 *p, const double (*uv)[2], int n,
+                          double out[3]);
 
 #endif
