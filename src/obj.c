@@ -13,7 +13,7 @@
  * CRLF line ends, a leading UTF-8 byte order mark, and a backslash at the end of a line joining it
  * with the next. Material and file names are the rest of the line, trimmed, so they may contain
  * spaces and '#'. On numeric statements a '#' token starts a comment.
- * `s vt vn vp l p` and the free-form curve/surface statements are ignored silently; other
+ * `s vn vp l p` and the free-form curve/surface statements are ignored silently; other
  * unknown statements are ignored with one warning per keyword (at most 32 different keywords).
  * Objects: `o NAME` makes the following faces belong to object NAME (the rest of the line,
  * trimmed); so does `g NAME` while no `o` has been read (files of exporters that write only
@@ -39,6 +39,13 @@
  *    name and warns once per name ("PATH:LINE: unknown material 'X'; using grey default").
  *  - faces before any `usemtl` use a material named "default" (rho 0.5, E 0), created only when
  *    such a face exists (or the library's own "default" if one defines it).
+ *  - textures: `map_Kd [OPTIONS] FILE` (the last word, relative to the MTL file; options such as
+ *    -s and -o are not applied) gives each face of the material whose every vertex has a `vt`
+ *    the mean of the PNG or JPEG texture over its UV footprint times Kd, as a variant material
+ *    (texture.c; hr_scene_add_variant). `vt u v` pairs are kept for this; a malformed one only
+ *    leaves its faces untextured (vt was never an error). A texture that cannot be read warns
+ *    once and leaves Kd alone; in memory mode (hr_scene_parse_obj_mtl) none is read, with one
+ *    warning.
  * Polygons: hr_scene_add_polygon splits them; degenerate ones are skipped with the warning
  * "PATH:LINE: degenerate polygon skipped"; non-planar ones with more than 4 vertices, ones that are
  * not simple (edges crossing or touching, a vertex revisited other than at the ends of a bridge)
@@ -71,6 +78,7 @@
  * which gave normals of length 1.0000056 (extent 1e-80) or silently zero areas.
  */
 #include "hrad.h"
+#include "texture.h"
 #include "vec.h"
 
 #include <errno.h>
@@ -106,7 +114,17 @@ typedef struct obj_ctx {
   size_t cap_face;
   int cur_mat;  /* material of following faces; -1 = none chosen yet ("default") */
   int seen_o;   /* an `o` statement was read: `g` no longer names objects */
-  int warned_map; /* map_Kd already reported */
+  int warned_map; /* map_Kd in memory mode already reported */
+  /* textures (map_Kd): texture coordinates read so far (NaN for a malformed `vt`), the current
+   * face's, each material's texture slot (-1: none), and the textures, each read once */
+  double (*uvs)[2];
+  size_t nuvs, cap_uvs;
+  double (*face_uv)[2];
+  size_t cap_face_uv;
+  int *mat_tex;
+  size_t cap_mat_tex;
+  struct obj_tex *texs;
+  int ntexs;
   char *warned; /* unknown keywords already reported, each NUL-terminated */
   size_t warned_len, warned_cap;
   int nwarned;
@@ -125,6 +143,12 @@ typedef struct obj_ctx {
   const char *mem_mtl;
   size_t mem_mtl_len;
 } obj_ctx;
+
+typedef struct obj_tex {
+  char *path; /* resolved against the MTL file's directory */
+  int tried, ok;
+  hr_texture tex;
+} obj_tex;
 
 typedef struct face_rec {
   uint64_t hash; /* of the sorted positions */
@@ -387,6 +411,54 @@ static hr_status parse_color(obj_ctx *c, const char *mpath, long line, const cha
   return HR_OK;
 }
 
+/* Gives material 'mat' texture slot 'slot' (-1: none); 0 when out of memory. */
+static int set_texture(obj_ctx *c, int mat, int slot) {
+  size_t need = (size_t)c->s->nmats;
+  if (need > c->cap_mat_tex) {
+    size_t old = c->cap_mat_tex;
+    if (!grow((void **)&c->mat_tex, &c->cap_mat_tex, need, sizeof *c->mat_tex)) return 0;
+    for (size_t i = old; i < c->cap_mat_tex; i++) c->mat_tex[i] = -1;
+  }
+  c->mat_tex[mat] = slot;
+  return 1;
+}
+
+/* Handles `map_Kd [OPTIONS] FILE` of material 'cur' in MTL file 'mpath': the last word names
+ * the texture, relative to the MTL file. In memory mode no file is read: one warning. */
+static hr_status do_map_kd(obj_ctx *c, const char *mpath, long line, int cur, char *rest) {
+  if (c->mem_mode) {
+    if (!c->warned_map)
+      hr_log_warn(c->log, "%s:%ld: texture map_Kd '%.60s' not read (no files in memory mode)",
+                  mpath, line, rest);
+    c->warned_map = 1;
+    return HR_OK;
+  }
+  char *name = rest, *q = rest;
+  for (; *q; q += token_len(q), q = skip_blanks(q)) name = q;
+  size_t nl = token_len(name);
+  if (nl == 0) return HR_OK;
+  char *path = resolve_path(mpath, name, nl);
+  if (!path) return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", mpath, line);
+  int slot = 0;
+  while (slot < c->ntexs && strcmp(c->texs[slot].path, path)) slot++;
+  if (slot == c->ntexs) {
+    obj_tex *t = realloc(c->texs, (size_t)(c->ntexs + 1) * sizeof *t);
+    if (!t) {
+      free(path);
+      return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", mpath, line);
+    }
+    c->texs = t;
+    memset(&t[slot], 0, sizeof *t);
+    t[slot].path = path;
+    c->ntexs++;
+  } else {
+    free(path);
+  }
+  if (!set_texture(c, cur, slot))
+    return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", mpath, line);
+  return HR_OK;
+}
+
 /* Parses the MTL text 'buf' (mutable, NUL-terminated, 'len' bytes) read from 'mpath' and adds or
  * redefines its materials in the scene. Errors are "MPATH:LINE: what". */
 static hr_status parse_mtl(obj_ctx *c, const char *mpath, char *buf, size_t len) {
@@ -411,6 +483,8 @@ static hr_status parse_mtl(obj_ctx *c, const char *mpath, char *buf, size_t len)
         c->s->mats[cur].rho[k] = GREY[k];
         c->s->mats[cur].emit[k] = BLACK[k];
       }
+      if (!set_texture(c, cur, -1))
+        return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", mpath, line);
     } else if (kl == 2 && (memcmp(p, "Kd", 2) == 0 || memcmp(p, "Ke", 2) == 0)) {
       int is_kd = p[1] == 'd';
       const char *key = is_kd ? "Kd" : "Ke";
@@ -425,12 +499,9 @@ static hr_status parse_mtl(obj_ctx *c, const char *mpath, char *buf, size_t len)
         else
           c->s->mats[cur].emit[k] = rgb[k];
       }
-    } else if (kl == 6 && memcmp(p, "map_Kd", 6) == 0 && !c->warned_map) {
-      c->warned_map = 1;
-      hr_log_warn(c->log,
-                  "%s:%ld: texture map_Kd '%.60s' ignored: OBJ reflectance is Kd alone (convert "
-                  "to glTF for textures)",
-                  mpath, line, rest);
+    } else if (kl == 6 && memcmp(p, "map_Kd", 6) == 0 && cur >= 0) {
+      hr_status st = do_map_kd(c, mpath, line, cur, rest);
+      if (st != HR_OK) return st;
     }
     /* every other key (Ka, Ks, Ns, d, illum, map_*, ...) is irrelevant to diffuse radiosity */
   }
@@ -568,9 +639,10 @@ static int parse_int(char **pp, long long *out) {
 
 /* Parses one face reference token `v`, `v/vt`, `v//vn` or `v/vt/vn` at 'p' (length 'n');
  * returns 1 with the vertex index in '*vi', 0 if malformed. */
-static int parse_ref(char *p, size_t n, long long *vi) {
+static int parse_ref(char *p, size_t n, long long *vi, long long *ti) {
   char *end = p + n;
   long long dummy;
+  *ti = 0;
   if (!parse_int(&p, vi)) return 0;
   if (p == end) return 1;
   if (*p++ != '/') return 0;
@@ -578,7 +650,7 @@ static int parse_ref(char *p, size_t n, long long *vi) {
     p++;
     return parse_int(&p, &dummy) && p == end;
   }
-  if (!parse_int(&p, &dummy)) return 0;
+  if (!parse_int(&p, ti)) return 0;
   if (p == end) return 1;
   if (*p++ != '/') return 0;
   return parse_int(&p, &dummy) && p == end;
@@ -671,14 +743,43 @@ static int record_face(obj_ctx *c, size_t m, uint64_t hash, hr_vec3 nrm, long li
 }
 
 /* Handles `f ref ref ref ...` with the references at 'p'. */
+/* The material of the current face (its 'n' vertices and, with 'has_uv', texture coordinates in
+ * c->face, c->face_uv): the current one, or, when that has a readable map_Kd, a variant whose
+ * reflectance is Kd times the texture's mean over the face (texture.c). A texture that cannot be
+ * read warns once and leaves Kd alone. */
+static hr_status textured_material(obj_ctx *c, long line, size_t n, int has_uv, int *mat) {
+  int m = *mat;
+  if (!has_uv || m < 0 || (size_t)m >= c->cap_mat_tex || c->mat_tex[m] < 0) return HR_OK;
+  obj_tex *t = &c->texs[c->mat_tex[m]];
+  if (!t->tried) {
+    hr_err e = {{0}};
+    t->tried = 1;
+    t->ok = hr_texture_load(t->path, &t->tex, &e) == HR_OK;
+    if (!t->ok)
+      hr_log_warn(c->log, "%s:%ld: texture of material '%.60s' not used (%s); Kd alone is the "
+                          "reflectance", c->path, line, c->s->mats[m].name, e.msg);
+  }
+  if (!t->ok) return HR_OK;
+  double mean[3], rho[3];
+  hr_texture_mean_poly(&t->tex, c->face, (const double(*)[2])c->face_uv, (int)n, mean);
+  for (int k = 0; k < 3; k++) {
+    rho[k] = c->s->mats[m].rho[k] * mean[k];
+    rho[k] = rho[k] < 0 ? 0 : rho[k] > 1 ? 1 : rho[k];
+  }
+  if (hr_scene_add_variant(c->s, m, rho, mat) != HR_OK)
+    return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
+  return HR_OK;
+}
+
 static hr_status do_face(obj_ctx *c, long line, char *p) {
   size_t n = 0;
+  int has_uv = 1; /* every vertex has a texture coordinate */
   for (;;) {
     p = skip_blanks(p);
     if (*p == '\0' || *p == '#') break;
     size_t tl = token_len(p);
-    long long vi;
-    if (!parse_ref(p, tl, &vi))
+    long long vi, ti;
+    if (!parse_ref(p, tl, &vi, &ti))
       return hr_err_set(c->err, HR_ERR_PARSE, "%s:%ld: malformed vertex reference '%.*s'", c->path,
                         line, shown(tl), p);
     if (vi == 0)
@@ -692,8 +793,13 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
                         "%s:%ld: vertex index %.*s out of range (%zu vertices so far)", c->path,
                         line, shown(il), p, c->nverts);
     }
-    if (!grow((void **)&c->face, &c->cap_face, n + 1, sizeof *c->face))
+    if (!grow((void **)&c->face, &c->cap_face, n + 1, sizeof *c->face) ||
+        !grow((void **)&c->face_uv, &c->cap_face_uv, n + 1, sizeof *c->face_uv))
       return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
+    long long abs_t = ti > 0 ? ti : (long long)c->nuvs + ti + 1;
+    has_uv = has_uv && ti != 0 && abs_t >= 1 && abs_t <= (long long)c->nuvs &&
+             !isnan(c->uvs[abs_t - 1][0]);
+    if (has_uv) memcpy(c->face_uv[n], c->uvs[abs_t - 1], sizeof c->face_uv[n]);
     c->face[n++] = c->verts[abs_i - 1];
     p += tl;
   }
@@ -743,8 +849,11 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
       return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
     return HR_OK;
   }
+  int mat = c->cur_mat;
+  hr_status st = textured_material(c, line, n, has_uv, &mat);
+  if (st != HR_OK) return st;
   hr_poly_result res;
-  hr_status st = hr_scene_add_polygon(c->s, c->face, (int)n, c->cur_mat, &res);
+  st = hr_scene_add_polygon(c->s, c->face, (int)n, mat, &res);
   if (st == HR_ERR_NOMEM) return hr_err_set(c->err, st, "%s:%ld: out of memory", c->path, line);
   if (st != HR_OK) return hr_err_set(c->err, st, "%s:%ld: invalid polygon", c->path, line);
   if (res == HR_POLY_DEGENERATE)
@@ -772,11 +881,34 @@ static hr_status do_face(obj_ctx *c, long line, char *p) {
 
 /* Statements that carry nothing radiosity needs and are skipped without a warning. */
 static const char *const IGNORED[] = {
-    "s",        "vt",     "vn",     "vp",         "l",         "p",
+    "s",     "vn",     "vp",         "l",         "p",
     "cstype",   "deg",      "bmat", "step",   "curv",   "curv2",      "surf",      "parm",
     "trim",     "hole",     "scrv", "sp",     "end",    "con",        "mg",        "bevel",
     "c_interp", "d_interp", "lod",  "usemap", "maplib", "shadow_obj", "trace_obj", "ctech",
     "stech",    "call",     "csh",  NULL};
+
+/* Handles `vt u v [w]`: kept for map_Kd; a malformed one is kept as NaN (no texture for faces
+ * that use it), never an error, as before textures were read. */
+static hr_status do_texcoord(obj_ctx *c, long line, char *p) {
+  double uv[2] = {NAN, NAN};
+  for (int k = 0; k < 2; k++) {
+    p = skip_blanks(p);
+    char *end;
+    double x = strtod(p, &end);
+    if (end == p || !isfinite(x)) {
+      uv[0] = uv[1] = NAN;
+      break;
+    }
+    uv[k] = x;
+    p = end;
+  }
+  if (!grow((void **)&c->uvs, &c->cap_uvs, c->nuvs + 1, sizeof *c->uvs))
+    return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", c->path, line);
+  c->uvs[c->nuvs][0] = uv[0];
+  c->uvs[c->nuvs][1] = uv[1];
+  c->nuvs++;
+  return HR_OK;
+}
 
 /* Handles `o NAME` and `g NAME` (see the file comment). */
 static hr_status do_object(obj_ctx *c, long line, char kw, const char *name) {
@@ -833,6 +965,8 @@ static hr_status parse_obj_text(obj_ctx *c, char *buf, size_t len) {
       st = do_usemtl(c, line, rest);
     else if (kl == 1 && (p[0] == 'o' || p[0] == 'g'))
       st = do_object(c, line, p[0], rest);
+    else if (kl == 2 && p[0] == 'v' && p[1] == 't')
+      st = do_texcoord(c, line, rest);
     else if (kl == 6 && memcmp(p, "mtllib", 6) == 0)
       st = do_mtllib(c, line, rest);
     else
@@ -886,6 +1020,14 @@ static hr_status parse_owned(char *buf, size_t len, const char *path, const hr_l
   free(c.rpos);
   free(c.rtab);
   free(c.sorted);
+  free(c.uvs);
+  free(c.face_uv);
+  free(c.mat_tex);
+  for (int i = 0; i < c.ntexs; i++) {
+    free(c.texs[i].path);
+    hr_texture_free(&c.texs[i].tex);
+  }
+  free(c.texs);
   if (st != HR_OK) {
     hr_scene_destroy(&c.s);
     return st;

@@ -11,6 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/stat.h>
 
 /* jpeglib.h needs FILE and size_t declared first */
 #include <jpeglib.h>
@@ -150,6 +151,9 @@ hr_status hr_texture_decode(const unsigned char *data, size_t len, const char *n
 
 hr_status hr_texture_load(const char *path, hr_texture *t, hr_err *err) {
   memset(t, 0, sizeof *t);
+  struct stat sb;
+  if (stat(path, &sb) == 0 && !S_ISREG(sb.st_mode)) /* a FIFO would block */
+    return hr_err_set(err, HR_ERR_IO, "%s: not a regular file", path);
   FILE *fp = fopen(path, "rb");
   if (!fp) return hr_err_set(err, HR_ERR_IO, "%s: cannot open: %s", path, strerror(errno));
   unsigned char *buf = NULL;

@@ -4,6 +4,8 @@
  * third-party scenes in ../shared/scenes checked against numbers derived independently. */
 #include "hrad.h"
 
+#include <png.h>
+
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -1072,10 +1074,54 @@ static void test_objects(void) {
     CHECK(hr_scene_poly_object(s, p) == poly_obj[p], "poly %d in object %d, want %d", p,
           hr_scene_poly_object(s, p), poly_obj[p]);
   CHECK(hr_scene_poly_object(s, 5) == -1 && hr_scene_object_name(s, 3) == NULL, "out of range");
-  CHECK(count_msgs(&cap, "map_Kd 'a.png' ignored") == 1 && count_msgs(&cap, "map_Kd") == 1,
+  CHECK(count_msgs(&cap, "map_Kd 'a.png' not read") == 1 && count_msgs(&cap, "map_Kd") == 1,
         "map_Kd warnings: %d", count_msgs(&cap, "map_Kd"));
   CHECK(hr_scene_material_count(s) == 3 && hr_scene_poly_material(s, 0) >= 0,
         "materials %d", hr_scene_material_count(s));
+  hr_scene_destroy(&s);
+}
+
+/* map_Kd: a quad with texture coordinates over a 64x64 PNG, white (sRGB 255) for u < 0.5 and sRGB
+ * 128 beyond, Kd 0.8: its reflectance is 0.8 times the texture's mean, 0.8 (1 + 0.2159) / 2; a
+ * face without vt, or of a material whose texture is missing (one warning), keeps Kd. */
+static void test_map_kd(void) {
+  enum { W = 64 };
+  static unsigned char px[W * W * 3];
+  for (int y = 0; y < W; y++)
+    for (int x = 0; x < W; x++)
+      for (int k = 0; k < 3; k++) px[3 * (y * W + x) + k] = x < W / 2 ? 255 : 128;
+  char png[600];
+  snprintf(png, sizeof png, "%s/tex.png", tmpdir);
+  png_image img;
+  memset(&img, 0, sizeof img);
+  img.version = PNG_IMAGE_VERSION;
+  img.width = img.height = W;
+  img.format = PNG_FORMAT_RGB;
+  CHECK(png_image_write_to_file(&img, png, 0, px, 0, NULL), "writing %s", png);
+  write_file("t.mtl", "newmtl tex\nKd 0.8 0.8 0.8\nmap_Kd -s 1 1 1 tex.png\n"
+                      "newmtl lost\nKd 0.3 0.3 0.3\nmap_Kd nosuch.png\n");
+  const char *path = write_file("t.obj", "mtllib t.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                                         "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl tex\n"
+                                         "f 1/1 2/2 3/3 4/4\nf 1 3 2\n"
+                                         "usemtl lost\nf 1/1 4/4 2/2\nf 2/2 4/4 3/3\n");
+  logcap cap = {0};
+  hr_log log = {cap_fn, &cap};
+  hr_err err = {{0}};
+  hr_scene *s = NULL;
+  hr_status st = hr_scene_load_obj(path, &log, &s, &err);
+  CHECK(st == HR_OK && s && s->npolys == 4, "status %d: %s", st, err.msg);
+  if (!s || s->npolys != 4) return;
+  double want = 0.8 * (1 + 0.2158605) / 2;
+  const hr_material *m0 = &s->mats[s->surfs[0].material];
+  CHECK(fabs(m0->rho[0] - want) < 0.01 * want && !strcmp(m0->name, "tex") &&
+            m0->base == hr_scene_find_material(s, "tex"),
+        "textured quad: rho %g, want %g", m0->rho[0], want);
+  CHECK(s->mats[s->surfs[1].material].rho[0] == 0.8, "face without vt: rho %g",
+        s->mats[s->surfs[1].material].rho[0]);
+  CHECK(s->mats[s->surfs[2].material].rho[0] == 0.3 && count_msgs(&cap, "not used") == 1,
+        "missing texture: rho %g, %d warnings", s->mats[s->surfs[2].material].rho[0],
+        count_msgs(&cap, "not used"));
+  CHECK(hr_scene_material_count(s) == 2, "%d input materials", hr_scene_material_count(s));
   hr_scene_destroy(&s);
 }
 
@@ -1098,6 +1144,7 @@ int main(void) {
   test_range();
   test_parse_obj_mtl();
   test_objects();
+  test_map_kd();
   remove_tmpdir();
   if (shared_missing()) {
     printf("shared scenes: skipped (%s/scenes missing)\n", HR_SHARED_DIR);
