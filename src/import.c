@@ -36,7 +36,6 @@
 #include <assimp/postprocess.h>
 #include <assimp/scene.h>
 #include <ctype.h>
-#include <dirent.h>
 #include <errno.h>
 #include <math.h>
 #include <pthread.h>
@@ -240,44 +239,6 @@ static hr_status decode_embedded(const imp_ctx *c, const struct aiTexture *et, h
   return st;
 }
 
-/* A file in directory 'dir' (ending in '/', or "" for the working directory) whose name equals
- * 'name' but for case (exporters on Windows write IMAGE1.JPG for image1.jpg): its path into
- * 'out', which is left alone when there is none. */
-static void find_nocase(const char *dir, const char *name, char *out, size_t n) {
-  DIR *d = opendir(dir[0] ? dir : ".");
-  if (!d) return;
-  struct dirent *e;
-  while ((e = readdir(d)))
-    if (!strcasecmp(e->d_name, name)) {
-      snprintf(out, n, "%s%s", dir, e->d_name);
-      break;
-    }
-  closedir(d);
-}
-
-/* Reads texture file 'key' relative to the scene's directory, then by its base name there. */
-static hr_status load_file_texture(const imp_ctx *c, const char *key, hr_texture *t,
-                                   hr_err *err) {
-  char rel[4096], dir[4096];
-  snprintf(rel, sizeof rel, "%s", key);
-  for (char *p = rel; *p; p++)
-    if (*p == '\\') *p = '/';
-  snprintf(dir, sizeof dir, "%s", c->path);
-  char *slash = strrchr(dir, '/');
-  if (slash) slash[1] = '\0';
-  else dir[0] = '\0';
-  char full[8400];
-  snprintf(full, sizeof full, "%s%s", rel[0] == '/' ? "" : dir, rel);
-  struct stat sb;
-  if (stat(full, &sb) != 0) {
-    const char *b = strrchr(rel, '/');
-    b = b ? b + 1 : rel;
-    snprintf(full, sizeof full, "%s%s", dir, b);
-    if (stat(full, &sb) != 0) find_nocase(dir, b, full, sizeof full);
-  }
-  return hr_texture_load(full, t, err);
-}
-
 /* Reads slot 'i' if it has not been tried; 1 when it holds a texture. Failures warn once. */
 static int tex_ready(imp_ctx *c, int i) {
   tex_slot *ts = &c->tex[i];
@@ -285,8 +246,9 @@ static int tex_ready(imp_ctx *c, int i) {
   ts->tried = 1;
   hr_err e = {{0}};
   const struct aiTexture *et = embedded(c, ts->key);
-  hr_status st = et ? decode_embedded(c, et, &ts->tex, &e) : load_file_texture(c, ts->key,
-                                                                                &ts->tex, &e);
+  char full[8400];
+  if (!et) hr_texture_resolve(c->path, ts->key, full, sizeof full);
+  hr_status st = et ? decode_embedded(c, et, &ts->tex, &e) : hr_texture_load(full, &ts->tex, &e);
   ts->ok = st == HR_OK;
   if (!ts->ok)
     hr_log_warn(c->log, "%s: texture '%.100s' not used (%s); the colour factor alone is the "

@@ -437,7 +437,10 @@ static hr_status do_map_kd(obj_ctx *c, const char *mpath, long line, int cur, ch
   for (; *q; q += token_len(q), q = skip_blanks(q)) name = q;
   size_t nl = token_len(name);
   if (nl == 0) return HR_OK;
-  char *path = resolve_path(mpath, name, nl);
+  char *raw = strndup(name, nl), full[8400];
+  if (raw) hr_texture_resolve(mpath, raw, full, sizeof full);
+  char *path = raw ? strdup(full) : NULL;
+  free(raw);
   if (!path) return hr_err_set(c->err, HR_ERR_NOMEM, "%s:%ld: out of memory", mpath, line);
   int slot = 0;
   while (slot < c->ntexs && strcmp(c->texs[slot].path, path)) slot++;

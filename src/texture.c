@@ -4,6 +4,7 @@
  * the project lives in jpeg_decode, around that library's calls. */
 #include "texture.h"
 
+#include <dirent.h>
 #include <errno.h>
 #include <math.h>
 #include <png.h>
@@ -11,6 +12,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <strings.h>
 #include <sys/stat.h>
 
 /* jpeglib.h needs FILE and size_t declared first */
@@ -233,4 +235,36 @@ void hr_texture_mean_poly(const hr_texture *t, const hr_vec3 *p, const double (*
     wsum += w;
   }
   for (int ch = 0; ch < 3; ch++) out[ch] = wsum > 0 ? sum[ch] / wsum : first[ch];
+}
+
+/* A file in directory 'dir' (ending in '/', or "" for the working directory) whose name equals
+ * 'name' but for case: its path into 'out', which is left alone when there is none. */
+static void find_nocase(const char *dir, const char *name, char *out, size_t n) {
+  DIR *d = opendir(dir[0] ? dir : ".");
+  if (!d) return;
+  struct dirent *e;
+  while ((e = readdir(d)))
+    if (!strcasecmp(e->d_name, name)) {
+      snprintf(out, n, "%s%s", dir, e->d_name);
+      break;
+    }
+  closedir(d);
+}
+
+void hr_texture_resolve(const char *from, const char *name, char *out, size_t n) {
+  char rel[4096], dir[4096];
+  snprintf(rel, sizeof rel, "%s", name);
+  for (char *p = rel; *p; p++)
+    if (*p == '\\') *p = '/';
+  snprintf(dir, sizeof dir, "%s", from);
+  char *slash = strrchr(dir, '/');
+  if (slash) slash[1] = '\0';
+  else dir[0] = '\0';
+  snprintf(out, n, "%s%s", rel[0] == '/' ? "" : dir, rel);
+  struct stat sb;
+  if (stat(out, &sb) == 0) return;
+  const char *b = strrchr(rel, '/');
+  b = b ? b + 1 : rel;
+  snprintf(out, n, "%s%s", dir, b);
+  if (stat(out, &sb) != 0) find_nocase(dir, b, out, n);
 }

@@ -27,6 +27,12 @@ hr_status hr_texture_decode(const unsigned char *data, size_t len, const char *n
                             hr_texture *t, hr_err *err);
 /* Reads and decodes the file at 'path'; HR_ERR_IO when it cannot be read. */
 hr_status hr_texture_load(const char *path, hr_texture *t, hr_err *err);
+/* The path of texture 'name' as a model file 'from' names it, into 'out' (n bytes): backslashes
+ * become slashes, a relative name is taken from the directory of 'from'; when that does not
+ * exist, the base name in that directory, then the same ignoring case (exporters on Windows
+ * write ".\\IMAGE1.JPG" for image1.jpg). Can't fail (a path that does not exist is left for
+ * hr_texture_load to report). */
+void hr_texture_resolve(const char *from, const char *name, char *out, size_t n);
 /* Builds a texture from 8-bit sRGB RGBA texels (w*h*4 bytes, row 0 at the top). */
 hr_status hr_texture_from_rgba8(const unsigned char *rgba, int w, int h, hr_texture *t,
                                 hr_err *err);
