@@ -135,7 +135,9 @@ mpi 4 "${q[@]}" --threads 1 --resume "$t/k1.ckpt" -o "$t/k1r4" cornell \
 ( exec mpirun -np 3 --bind-to none "$hrad" --size 96x72 --bf-low 3e-3 --threads 1 \
     --checkpoint "$t/kk.ckpt" --checkpoint-every 0 -o "$t/kk" cornell > /dev/null 2>&1 ) &
 pid=$!
-for _ in $(seq 1000); do [ -e "$t/kk.ckpt" ] && break; sleep 0.01; done
+# (up to 60 s for the first checkpoint: a loaded machine starts 3 ranks slowly)
+for _ in $(seq 6000); do [ -e "$t/kk.ckpt" ] && break; sleep 0.01; done
+[ -e "$t/kk.ckpt" ] || bad "the 3-rank job wrote no checkpoint within 60 s"
 sleep "0.$((RANDOM % 5))"
 kill -KILL $pid 2>/dev/null
 wait $pid 2>/dev/null
