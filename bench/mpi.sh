@@ -4,7 +4,8 @@
 # and hrad's per-rank table (links, leaves, rays, busy and MPI seconds, collectives, bytes sent,
 # RSS; min/mean/max). Runs above the machine's cores are oversubscribed: their wall times are not
 # speed-ups (the table says so); their counts, volumes and imbalance are what predicts scaling.
-# Then the model of bench/mpimodel.c for each scene.
+# Then the model of bench/mpimodel.c for each scene, and the balancing methods of
+# bench/partbench.c on the scene's final patch/link graph (P = 2 to 64).
 # Usage: bench/mpi.sh BUILD [SCENE...]   (default scenes: room floor museum)
 set -u
 build=${1:-build}
@@ -26,4 +27,7 @@ for sc in "${scenes[@]}"; do
   done
   echo "== model: $build/bench/mpimodel $sc"
   "$build/bench/mpimodel" "$sc"
+  echo "== balancing methods on the final graph: $build/bench/partbench (graph of a 2-rank run)"
+  mpirun -np 2 --bind-to none "$build/hrad" --quiet --threads 1 --size 64x48 \
+    --dump-graph "$out/$sc.graph" -o "$out/g" "$sc" && "$build/bench/partbench" "$out/$sc.graph"
 done

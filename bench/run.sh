@@ -9,6 +9,7 @@
 #   3. Speedup curve: $BENCH_OUT/speedup.png (gnuplot), skipped with a message without gnuplot.
 #   4. callgrind instruction counts per phase of `hrad --threads 1 room` (skipped without
 #      valgrind).
+#   5. The distributed solver and graph balancing (bench/mpi.sh; BENCH_MPI=0 skips it).
 # Results: $BENCH_OUT (default BUILD_DIR/bench): runs.csv (every run), summary.csv (the tables),
 # rayrate.csv, callgrind.csv, speedup.dat, speedup.png, callgrind.out.
 #
@@ -341,13 +342,13 @@ else
     init=$(($(ir hr_vis_create) + $(ir hr_shaft_index_create) + $(ir hr_link_init)))
     refine=$(($(ir hr_link_refine) + $(ir hr_link_sort)))
     gather=$(ir gather)
-    pp=$(ir push_pull_all)
+    pp=$(ir hr_push_pull)
     {
       echo "phase,functions,ir"
       echo "init graph,hr_vis_create+hr_shaft_index_create+hr_link_init,$init"
       echo "refine,hr_link_refine+hr_link_sort,$refine"
       echo "gather,gather,$gather"
-      echo "push-pull,push_pull_all,$pp"
+      echo "push-pull,hr_push_pull,$pp"
       echo "solve,hr_solver_run,$solve"
       echo "program,PROGRAM TOTALS (incl. scene build and writing the outputs),$total"
       for f in hr_shaft_filter hr_vf_pair hr_ff_pair hr_vis_segments_cand hr_vis_segments write_pictures; do
@@ -358,6 +359,18 @@ else
       printf "   %-12s %13.0f Ir  %6.2f%% of solve   %s\n", $1, $3, \
         100 * $3 / solve, $2 }' "$CG"
     echo "   (deterministic: compare these counts across commits; profile in $cgout)"
+  fi
+fi
+# 5. The distributed solver (BENCHMARKS.md, "Distributed solver" and "Graph balancing"): phase
+#    and per-rank tables at 1, 2, 4 and 8 ranks, the model, and the balancing methods on the
+#    final graphs (bench/mpi.sh). BENCH_MPI=0 skips it; skipped without mpirun.
+if [[ ${BENCH_MPI:-1} != 0 ]]; then
+  if command -v mpirun >/dev/null; then
+    echo
+    echo "== 5. distributed solver (bench/mpi.sh)"
+    bash "$(dirname "$0")/mpi.sh" "$BUILD" $BENCH_SCENES
+  else
+    echo "== 5. distributed solver: skipped (no mpirun; scripts/setup.sh installs openmpi-bin)"
   fi
 fi
 echo
