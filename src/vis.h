@@ -102,4 +102,10 @@ hr_status hr_shaft_candidates(const hr_shaft_index *x, const hr_vec3 *pa, int na
 int hr_shaft_filter(const hr_scene *s, const hr_vec3 *pa, int na, int sa, const hr_vec3 *pb,
                     int nb, int sb, const int32_t *cand, int ncand, int32_t *out);
 
+/* The shaft tests run in AVX2 when the CPU has it (chosen per call; the answers are the same bit
+ * for bit). 'allow' 0 makes every later call take the baseline kernels, 1 restores the choice
+ * (for tests and benchmarks; not thread-safe against concurrent shaft calls). Returns whether
+ * later calls take the AVX2 kernels. */
+int hr_shaft_use_avx2(int allow);
+
 #endif

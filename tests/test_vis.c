@@ -858,12 +858,53 @@ static void print_rates(void) {
   hr_scene_destroy(&s);
 }
 
+/* The AVX2 and the baseline shaft kernels give the same lists (each checked above through the
+ * kernel the CPU takes): every facing pair of a random scene, through the BVH and the filter. */
+static void test_shaft_kernels(void) {
+  rng_state = 0x5eed5eedull;
+  hr_scene *s = random_scene(80, 150, 3);
+  hr_shaft_index *x = NULL;
+  REQUIRE(hr_shaft_index_create(s, &x) == HR_OK, "shaft index");
+  int32_t *l[2] = {NULL, NULL}, *all = malloc(sizeof(int32_t) * (size_t)s->nsurfs),
+          *f[2] = {malloc(sizeof(int32_t) * (size_t)s->nsurfs),
+                   malloc(sizeof(int32_t) * (size_t)s->nsurfs)};
+  REQUIRE(all && f[0] && f[1], "out of memory");
+  for (int i = 0; i < s->nsurfs; i++) all[i] = i;
+  int cap[2] = {0, 0}, avx = hr_shaft_use_avx2(1);
+  long pairs = 0, listed = 0, differ = 0;
+  for (int it = 0; it < 400; it++) {
+    int a, b, n[2] = {0, 0}, nf[2];
+    pick_facing_pair(s, &a, &b);
+    const hr_surface *A = &s->surfs[a], *B = &s->surfs[b];
+    for (int k = 0; k < 2; k++) { /* k = 0: the CPU's choice, 1: the baseline */
+      hr_shaft_use_avx2(k == 0);
+      REQUIRE(hr_shaft_candidates(x, A->v, A->nverts, a, B->v, B->nverts, b, &l[k], &n[k],
+                                  &cap[k]) == HR_OK, "candidates");
+      nf[k] = hr_shaft_filter(s, A->v, A->nverts, a, B->v, B->nverts, b, all, s->nsurfs, f[k]);
+    }
+    differ += n[0] != n[1] || memcmp(l[0], l[1], sizeof(int32_t) * (size_t)n[0]) != 0 ||
+              nf[0] != nf[1] || memcmp(f[0], f[1], sizeof(int32_t) * (size_t)nf[0]) != 0;
+    pairs++;
+    listed += n[1];
+  }
+  hr_shaft_use_avx2(1);
+  printf("shaft kernels: %s against the baseline on %ld pairs (%ld candidates): %ld differ\n",
+         avx ? "AVX2" : "baseline (no AVX2 on this CPU)", pairs, listed, differ);
+  CHECK(differ == 0, "AVX2 and baseline shaft kernels disagree on %ld of %ld pairs", differ,
+        pairs);
+  CHECK(listed > pairs, "too few candidates (%ld) to compare the kernels", listed);
+  free(l[0]), free(l[1]), free(f[0]), free(f[1]), free(all);
+  hr_shaft_index_destroy(&x);
+  hr_scene_destroy(&s);
+}
+
 int main(void) {
   test_exact();
   test_plates();
   test_embree_vs_ref();
   test_blockers();
   test_shafts();
+  test_shaft_kernels();
   print_rates();
   if (failures) {
     fprintf(stderr, "test_vis: %d failure(s)\n", failures);
