@@ -12,6 +12,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "hrad_version.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -27,6 +29,10 @@ typedef enum {
   HR_ERR_UNPHYSICAL,/* the solution became non-finite or broke the physical bound E/(1-rho) */
   HR_ERR_REMOTE     /* another MPI rank failed (it reports why); this one stopped with it */
 } hr_status;
+
+/* The library's version, "MAJOR.MINOR.PATCH": HR_VERSION_STRING of the build that made it (a
+ * program can compare it with the HR_VERSION_STRING it was compiled against). Can't fail. */
+const char *hr_version(void);
 
 typedef struct hr_err {
   char msg[512];

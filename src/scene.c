@@ -12,6 +12,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+const char *hr_version(void) { return HR_VERSION_STRING; }
+
 hr_status hr_err_set(hr_err *err, hr_status st, const char *fmt, ...) {
   if (err) {
     va_list ap;

@@ -3,7 +3,10 @@
  * three.js, OrbitControls, GLTFLoader and BufferGeometryUtils are embedded base64-encoded;
  * at load time a small classic script turns them into blob: module URLs (rewriting their
  * 'three' and relative imports to those URLs) and imports them; the .glb is embedded
- * base64-encoded as well and handed to GLTFLoader.parse (fetch() of file:// is blocked). */
+ * base64-encoded as well and handed to GLTFLoader.parse (fetch() of file:// is blocked).
+ * The three.js files come from the copy embedded at build time (cmake/viewer_assets.cmake,
+ * hr_viewer_assets), so an installed or copied binary needs no source tree; $HRAD_THREE_DIR, when
+ * set, names a node_modules/three directory to read them from instead. */
 #include "output.h"
 
 #include <errno.h>
@@ -11,14 +14,16 @@
 #include <stdlib.h>
 #include <string.h>
 
-#ifndef HR_SOURCE_DIR
-#define HR_SOURCE_DIR "."
-#endif
-
 const char *hr_viewer_three_dir(void) {
   const char *e = getenv("HRAD_THREE_DIR");
-  if (e && *e) return e;
-  return HR_SOURCE_DIR "/node_modules/three";
+  return e && *e ? e : NULL;
+}
+
+/* The embedded file 'name' (relative to the three directory), or NULL. */
+static const hr_asset *find_asset(const char *name) {
+  for (int i = 0; i < hr_viewer_nassets; i++)
+    if (!strcmp(hr_viewer_assets[i].name, name)) return &hr_viewer_assets[i];
+  return NULL;
 }
 
 /* Reads a whole file; NULL when it cannot. */
@@ -210,6 +215,64 @@ static void put_js_string(FILE *fp, const char *s) {
   fputc('"', fp);
 }
 
+/* Finds module 'm': in directory 'three' when it is not NULL (the bytes read are also returned
+ * through 'owned', for the caller to free), else in the embedded copy. HR_ERR_IO naming the
+ * path when it is missing. */
+static hr_status module_source(const char *three, const modsrc *m, const unsigned char **src,
+                               size_t *len, unsigned char **owned, hr_err *err) {
+  char p[4096];
+  if (!three) {
+    const hr_asset *a = find_asset(m->rel[0]);
+    if (a) {
+      *src = a->data, *len = a->len;
+      return HR_OK;
+    }
+    return hr_err_set(err, HR_ERR_IO,
+                      "%s: three.js was not embedded when hrad was built (run scripts/setup.sh "
+                      "and rebuild, or set HRAD_THREE_DIR to a node_modules/three directory)",
+                      m->rel[0]);
+  }
+  for (int c = 0; c < 2 && !*owned && m->rel[c]; c++) {
+    snprintf(p, sizeof p, "%s/%s", three, m->rel[c]);
+    *owned = read_all(p, len);
+  }
+  if (*owned) {
+    *src = *owned;
+    return HR_OK;
+  }
+  snprintf(p, sizeof p, "%s/%s", three, m->rel[0]);
+  return hr_err_set(err, HR_ERR_IO,
+                    "%s: three.js not found (set HRAD_THREE_DIR to a node_modules/three "
+                    "directory, or unset it to use the copy built in)",
+                    p);
+}
+
+/* three.js's licence, from the directory 'three' or the embedded copy; stays NULL if missing. */
+static void module_license(const char *three, const unsigned char **lic, size_t *len,
+                           unsigned char **owned) {
+  if (three) {
+    char p[4096];
+    snprintf(p, sizeof p, "%s/LICENSE", three);
+    *lic = *owned = read_all(p, len);
+  } else {
+    const hr_asset *a = find_asset("LICENSE");
+    if (a) *lic = a->data, *len = a->len;
+  }
+}
+
+int hr_viewer_available(void) {
+  const char *three = hr_viewer_three_dir();
+  hr_status st = HR_OK;
+  for (int i = 0; i < NMODS && st == HR_OK; i++) {
+    const unsigned char *src = NULL;
+    unsigned char *owned = NULL;
+    size_t len = 0;
+    st = module_source(three, &MODS[i], &src, &len, &owned, NULL);
+    free(owned);
+  }
+  return st == HR_OK;
+}
+
 hr_status hr_viewer_write(const char *path, const char *glb_name, hr_err *err) {
   if (!path || !glb_name || !*glb_name)
     return hr_err_set(err, HR_ERR_INVALID, "hr_viewer_write: no path or glb name");
@@ -225,28 +288,14 @@ hr_status hr_viewer_write(const char *path, const char *glb_name, hr_err *err) {
     else
       snprintf(glb_path, sizeof glb_path, "%s", glb_name);
   }
-  unsigned char *src[NMODS] = {0};
-  size_t srclen[NMODS] = {0};
-  unsigned char *lic = NULL, *glb = NULL;
-  size_t liclen = 0, glblen = 0;
+  const unsigned char *src[NMODS] = {0}, *lic = NULL;
+  size_t srclen[NMODS] = {0}, liclen = 0, glblen = 0;
+  unsigned char *owned[NMODS + 1] = {0}, *glb = NULL; /* what was read from files */
   hr_status st = HR_OK;
-  char p[4096];
-  for (int i = 0; i < NMODS && st == HR_OK; i++) {
-    for (int c = 0; c < 2 && !src[i] && MODS[i].rel[c]; c++) {
-      snprintf(p, sizeof p, "%s/%s", three, MODS[i].rel[c]);
-      src[i] = read_all(p, &srclen[i]);
-    }
-    if (!src[i]) {
-      snprintf(p, sizeof p, "%s/%s", three, MODS[i].rel[0]);
-      st = hr_err_set(err, HR_ERR_IO,
-                      "%s: three.js not found (run scripts/setup.sh, or set HRAD_THREE_DIR to "
-                      "a node_modules/three directory)",
-                      p);
-    }
-  }
+  for (int i = 0; i < NMODS && st == HR_OK; i++)
+    st = module_source(three, &MODS[i], &src[i], &srclen[i], &owned[i], err);
   if (st == HR_OK) {
-    snprintf(p, sizeof p, "%s/LICENSE", three);
-    lic = read_all(p, &liclen); /* optional */
+    module_license(three, &lic, &liclen, &owned[NMODS]); /* optional */
     glb = read_all(glb_path, &glblen);
     if (!glb) st = hr_err_set(err, HR_ERR_IO, "%s: cannot read the .glb to embed", glb_path);
   }
@@ -283,8 +332,7 @@ hr_status hr_viewer_write(const char *path, const char *glb_name, hr_err *err) {
     if (!ok && !e) e = errno;
     st = hr_file_close(fp, path, ok, e, err);
   }
-  for (int i = 0; i < NMODS; i++) free(src[i]);
-  free(lic);
+  for (int i = 0; i <= NMODS; i++) free(owned[i]);
   free(glb);
   return st;
 }

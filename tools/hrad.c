@@ -558,6 +558,7 @@ static void usage(void) {
       "  --max-pairs N        refuse scenes with more surface pairs than N (0: no limit,\n"
       "                       default %g)\n"
       "  -h, --help           this help\n"
+      "  --version            print the version (hrad MAJOR.MINOR.PATCH) and exit\n"
       "\n"
       "Exit status: 0 done, 1 bad input or a failure (nothing written), 2 usage error;\n"
       "interrupted by a signal: 128+N (Ctrl-C: 130; a second Ctrl-C stops at once).\n",
@@ -751,6 +752,9 @@ static void parse_args(cli *c, int argc, char **argv) {
     } else if (!strcmp(a, "-h") || !strcmp(a, "--help")) {
       usage();
       exit(0);
+    } else if (!strcmp(a, "--version")) {
+      printf("hrad %s\n", hr_version());
+      exit(0);
     } else if (!strcmp(a, "-o") || !strcmp(a, "--out")) {
       c->outdir = NEXT();
       if (!*c->outdir) die_usage("%s: empty directory name", a);
@@ -874,24 +878,6 @@ static void warn_cb(void *ud, const char *msg) {
 }
 
 /* ---------------------------------------------------------------- the output directory */
-
-/* Whether the three.js files hr_viewer_write embeds are installed. */
-static int three_available(void) {
-  static const char *const need[] = {"examples/jsm/controls/OrbitControls.js",
-                                     "examples/jsm/loaders/GLTFLoader.js",
-                                     "examples/jsm/utils/BufferGeometryUtils.js"};
-  const char *d = hr_viewer_three_dir();
-  char p[PATH_MAX + 100];
-  snprintf(p, sizeof p, "%s/build/three.module.min.js", d);
-  int ok = access(p, R_OK) == 0;
-  snprintf(p, sizeof p, "%s/build/three.module.js", d);
-  ok = ok || access(p, R_OK) == 0;
-  for (int i = 0; i < 3 && ok; i++) {
-    join(p, sizeof p, d, need[i]);
-    ok = access(p, R_OK) == 0;
-  }
-  return ok;
-}
 
 /* Checks -o before any work (every problem is a usage error), cleans up what killed runs left,
  * and creates this run's staging directory beside DIR. */
@@ -1763,12 +1749,13 @@ int main(int argc, char **argv) {
     prepare_outdir(&c);
     g_together = 1;
   }
-  c.viewer = g_rank == 0 && three_available();
+  c.viewer = g_rank == 0 && hr_viewer_available();
   if (!c.viewer && g_rank == 0)
     fprintf(stderr,
-            "hrad: warning: %s: three.js not found, so no viewer.html (run scripts/setup.sh, or "
-            "set HRAD_THREE_DIR)\n",
-            hr_viewer_three_dir());
+            "hrad: warning: %s: three.js not found, so no viewer.html (set HRAD_THREE_DIR to a "
+            "node_modules/three directory%s)\n",
+            hr_viewer_three_dir() ? hr_viewer_three_dir() : "built-in copy",
+            hr_viewer_three_dir() ? ", or unset it" : ", or rebuild after scripts/setup.sh");
   hr_err err = {{0}};
   hr_log log = {c.quiet ? NULL : warn_cb, NULL};
   hr_scene *scene = load_scene(&c, c.scene_arg, &log);
