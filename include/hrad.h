@@ -298,6 +298,26 @@ hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solv
 void hr_solver_destroy(hr_solver **s);
 /* Runs Figure 3 to completion. 'cb' may be NULL. */
 hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err);
+
+/* Progress of hr_solver_run, for progress bars and ETAs. */
+typedef enum {
+  HR_PHASE_LINK = 0, /* initial linking (paper step {1}): 'fraction' of the surface pairs done */
+  HR_PHASE_SOLVE     /* refinement iterations: 'fraction' is the share of the multigrid schedule
+                        done (levels of BF_e from bf_start down to bf_low, and convergence at
+                        BF_low), a lower bound that reaches 1 when the run ends */
+} hr_phase;
+/* Called on the thread that called hr_solver_run, with 'fraction' in [0, 1] never decreasing
+ * within a phase; at most about 10 times a second, and once with fraction 1 at the end of each
+ * phase. It must not call into the solver. */
+typedef void (*hr_progress_fn)(void *ud, hr_phase phase, double fraction);
+/* Sets (or with fn NULL, removes) the progress callback of 's'; call it before hr_solver_run,
+ * and with fn NULL before destroying 's'. HR_ERR_INVALID when 's' is NULL, HR_ERR_NOMEM.
+ * Note: hr_solver_run does not call it yet (the calls land with the rewrite of solve.c and
+ * link.c, issue 13); hr_solver_progress_report is the entry point those calls use. */
+hr_status hr_solver_set_progress(hr_solver *s, hr_progress_fn fn, void *ud);
+/* Delivers one report to the callback set for 's' (none: nothing happens). For the solver's
+ * own use; can't fail. */
+void hr_solver_progress_report(const hr_solver *s, hr_phase phase, double fraction);
 void hr_solver_stats(const hr_solver *s, hr_stats *st);
 
 /* Writes the solver's state at an iteration boundary (from the iteration callback, or after
@@ -414,6 +434,51 @@ typedef struct hr_leaf {
 /* Copies the current leaves (any order stable for a given solution); caller frees *leaves. */
 hr_status hr_solver_leaves(const hr_solver *s, hr_leaf **leaves, int64_t *nleaves);
 const hr_scene *hr_solver_scene(const hr_solver *s);
+
+/* ---------------------------------------------------------------- writing results (write.c) */
+
+/* The files hrad writes, for a solved (or partly solved) solver: each writer reads the current
+ * leaves, builds the smooth vertex mesh (seamless and crack-free; README "Outputs") and writes
+ * one file. On error nothing is left at 'path' (a failed write removes the partial file) and
+ * 'err' names the path and the cause (HR_ERR_IO); HR_ERR_NOMEM; HR_ERR_INVALID for bad
+ * arguments. Display colours are srgb(clamp(B * exposure, 0, 1)); an exposure <= 0 means the
+ * automatic one (hr_solver_exposure), so files written with 0 agree with each other. */
+
+/* The automatic exposure: the factor that maps the area-weighted 95th percentile of the
+ * luminance of non-emitting surfaces to 0.8 (1 for a black solution). */
+hr_status hr_solver_exposure(const hr_solver *s, double *exposure, hr_err *err);
+
+typedef struct hr_image_options {
+  int width, height;       /* pixels: each 16..16384, at most 2^26 in all (default 800 x 600) */
+  const hr_camera *camera; /* NULL (default): the scene's camera, else hr_scene_auto_camera */
+  double exposure;         /* linear factor, <= 0 (default): automatic */
+  int elements;            /* 0 (default): smooth image; 1: every element flat, with outlines */
+} hr_image_options;
+/* Fills 'o' with the defaults. */
+void hr_image_options_default(hr_image_options *o);
+
+/* SCENE.png: an 8-bit sRGB image of the solution (2x2 supersampled); 'o' NULL: the defaults. */
+hr_status hr_solver_write_png(const hr_solver *s, const char *path, const hr_image_options *o,
+                              hr_err *err);
+/* SCENE.ply: binary little-endian PLY of the smooth mesh; per vertex float x,y,z, uchar
+ * red,green,blue (display colour) and float radiosity_r/g/b (linear B, W/m^2). */
+hr_status hr_solver_write_ply(const hr_solver *s, const char *path, double exposure,
+                              hr_err *err);
+/* SCENE.glb: glTF 2.0 binary of the smooth mesh: one node and mesh per object of the scene
+ * (names kept), one unlit material per input material; COLOR_0 is linear B * exposure clamped to
+ * [0, 1], _RADIOSITY the unclamped linear B; asset.extras.exposure records the exposure. */
+hr_status hr_solver_write_glb(const hr_solver *s, const char *path, double exposure,
+                              hr_err *err);
+/* surfaces.csv: "id,area,r,g,b,status", one row per input polygon in input order (README). */
+hr_status hr_solver_write_csv(const hr_solver *s, const char *path, hr_err *err);
+/* stats.json: counts, per-phase times and the options 'o' the solver was made with. */
+hr_status hr_solver_write_json(const hr_solver *s, const hr_options *o, const char *path,
+                               hr_err *err);
+/* viewer.html at 'path': a self-contained page (three.js inlined, from the copy built into the
+ * library, or from $HRAD_THREE_DIR when set) showing the .glb 'glb_name' (relative to the
+ * directory of 'path' unless absolute; read and embedded) with orbit controls; works offline
+ * from file://. HR_ERR_IO naming the path when three.js or the .glb is missing. */
+hr_status hr_viewer_write(const char *path, const char *glb_name, hr_err *err);
 
 /* ---------------------------------------------------------------- reference path tracer (pt.c) */
 

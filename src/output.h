@@ -113,13 +113,7 @@ hr_status hr_ply_write(const char *path, const hr_mesh *m, double exposure, hr_e
  * scene (m->scene NULL) is one node, mesh and material named "radiosity". */
 hr_status hr_glb_write(const char *path, const hr_mesh *m, double exposure, hr_err *err);
 
-/* Writes viewer.html at 'path': a self-contained page (three.js, OrbitControls and GLTFLoader
- * inlined, the .glb embedded as base64) showing the model with orbit controls, no network or
- * server needed. 'glb_name' is the .glb file, relative to the directory of 'path' unless
- * absolute; it is read and embedded. three.js is the copy embedded at build time
- * (hr_viewer_assets), or read from $HRAD_THREE_DIR when that is set; when missing, HR_ERR_IO
- * with a message naming the path. */
-hr_status hr_viewer_write(const char *path, const char *glb_name, hr_err *err);
+/* hr_viewer_write (viewer.c) is public: hrad.h. */
 
 /* Flushes and closes 'fp' (written to 'path'); 'ok' == 0 means an earlier write failed with
  * errno 'e'. On any failure the partial file is removed and HR_ERR_IO names the cause. Every

@@ -157,7 +157,18 @@ int hr_scene_poly_object(const hr_scene *s, int poly) {
 
 int hr_scene_poly_material(const hr_scene *s, int poly) {
   if (poly < 0 || poly >= s->npolys) return -1;
-  for (int i = 0; i < s->nsurfs; i++) /* a polygon's surfaces are consecutive and in order */
+  /* A polygon's surfaces are consecutive and in order, so 'poly' never decreases over s->surfs:
+   * its first surface by bisection (a scene built otherwise falls back to a scan). */
+  int lo = 0, hi = s->nsurfs;
+  while (lo < hi) {
+    int mid = lo + (hi - lo) / 2;
+    if (s->surfs[mid].poly < poly)
+      lo = mid + 1;
+    else
+      hi = mid;
+  }
+  if (lo < s->nsurfs && s->surfs[lo].poly == poly) return s->mats[s->surfs[lo].material].base;
+  for (int i = 0; i < s->nsurfs; i++)
     if (s->surfs[i].poly == poly) return s->mats[s->surfs[i].material].base;
   return -1;
 }
