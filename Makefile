@@ -4,8 +4,9 @@ ASAN_BUILD ?= build-asan
 JOBS ?= $(shell nproc)
 SCENE ?= room
 OUT ?= hrad-out
+PREFIX ?= /usr/local
 
-.PHONY: all setup build run test test-asan bench clean
+.PHONY: all setup build run test test-asan bench clean install
 
 all: build
 
@@ -18,6 +19,11 @@ build: setup
 
 run: build
 	./$(BUILD)/hrad -o $(OUT) $(SCENE)
+
+# `make install PREFIX=P`: hrad, libhrad.a and libhrad.so, hrad.h, hrad.pc, the CMake package and
+# the man page into P (default /usr/local); README "Use it from your pipeline".
+install: build
+	cmake --install $(BUILD) --prefix $(PREFIX)
 
 test: build
 	cd $(BUILD) && ctest --output-on-failure -j $(JOBS)
