@@ -325,7 +325,7 @@ else
   if ! valgrind --tool=callgrind --callgrind-out-file="$cgout" "$HRAD" --threads 1 --quiet \
     -o "$TMP/cg" room >"$TMP/cg.log" 2>&1; then
     tail -n 20 "$TMP/cg.log" >&2
-    echo "   callgrind run failed (valgrind dies with SIGILL on AVX-512 code: build with -mavx2)"
+    echo "   callgrind run failed (valgrind dies with SIGILL on AVX-512 code: no -march=native)"
   else
     callgrind_annotate --inclusive=yes --threshold=100 "$cgout" >"$TMP/cg.txt"
     # Ir of a function: its exact name, else the sum of its OpenMP bodies (name._omp_fn.N; the
