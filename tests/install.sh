@@ -3,8 +3,9 @@
 # (cmake --install BUILD --prefix BUILD/install-test), then
 #  - checks the files of the installation (binary, libhrad.a, libhrad.so.X.Y.Z and its soname,
 #    headers, hrad.pc, the CMake package, the man page);
-#  - builds examples/solve.c against it with pkg-config and with CMake (find_package(hrad):
-#    hrad::hrad and hrad::hrad_static) and runs each on the built-in Cornell box;
+#  - builds examples/solve.c against it with pkg-config (shared, and libhrad.a with --static)
+#    and with CMake (find_package(hrad): hrad::hrad and hrad::hrad_static) and runs each on the
+#    built-in Cornell box;
 #  - checks their numbers: the floor's radiosity against the path tracer's (below), and every
 #    polygon the same as `hrad` writes to surfaces.csv;
 #  - runs the installed hrad from another directory: it writes viewer.html with three.js built
@@ -78,6 +79,18 @@ if [ -x "$T/solve-pc" ]; then
   (cd "$T" && LD_LIBRARY_PATH=$libdir ./solve-pc cornell pkgconfig.png > pkgconfig.out) ||
     bad "pkg-config example failed"
   check_example pkgconfig "$T/pkgconfig.out"
+fi
+
+# 1b. pkg-config --static: hrad.pc's Libs.private and Requires.private link libhrad.a
+libs=$(pkg-config --static --libs-only-other --libs-only-l hrad | sed 's/-lhrad //')
+cc -std=c11 -Wall -Wextra -Werror "$src/examples/solve.c" $(pkg-config --cflags hrad) \
+  "$libdir/libhrad.a" $libs -o "$T/solve-pc-static" 2> "$T/pcs.log" ||
+  { cat "$T/pcs.log"; bad "pkg-config --static build"; }
+if [ -x "$T/solve-pc-static" ]; then
+  ldd "$T/solve-pc-static" | grep -q libhrad && bad "solve-pc-static loads libhrad.so"
+  (cd "$T" && ./solve-pc-static cornell pkgconfig-static.png > pkgconfig-static.out) ||
+    bad "pkg-config --static example failed"
+  check_example pkgconfig-static "$T/pkgconfig-static.out"
 fi
 
 # 2. CMake, shared and static
