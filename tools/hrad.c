@@ -50,6 +50,9 @@
 #include <sys/stat.h>
 #include <time.h>
 #include <unistd.h>
+#ifdef _OPENMP
+#include <omp.h>
+#endif
 
 /* Limits the command line enforces on top of hr_solver_create's checks (README "Limits"). */
 #define MIN_SIDE 16                 /* --size: each side in MIN_SIDE..MAX_SIDE */
@@ -1742,6 +1745,12 @@ int main(int argc, char **argv) {
   parse_args(&c, argc, argv);
   c.snap_collect = c.snapshots && hr_dist_size(g_dist) > 1;
   if (c.list_mats) list_materials(&c);
+#ifdef _OPENMP
+  /* --threads bounds the whole process, the renderer included: a process-wide setting is the
+   * tool's to make, not the library's (hr_solver_run still sets it too, until its loops take
+   * their count from num_threads clauses). */
+  if (c.opt.threads > 0) omp_set_num_threads(c.opt.threads);
+#endif
   if (g_rank != 0) c.quiet = 1, c.snapshots = 0; /* rank 0 prints and writes */
   start_signals();
   if (g_rank == 0) {
