@@ -2,7 +2,8 @@
 # install.sh HRAD SRC [SHARED]: installs the build HRAD belongs to into a temporary prefix
 # (cmake --install BUILD --prefix BUILD/install-test), then
 #  - checks the files of the installation (binary, libhrad.a, libhrad.so.X.Y.Z and its soname,
-#    headers, hrad.pc, the CMake package, the man page);
+#    headers, hrad.pc, the CMake package, the man page), and that libhrad.so exports exactly
+#    the functions of hrad.h;
 #  - builds examples/solve.c against it with pkg-config (shared, and libhrad.a with --static)
 #    and with CMake (find_package(hrad): hrad::hrad and hrad::hrad_static) and runs each on the
 #    built-in Cornell box;
@@ -34,8 +35,16 @@ done
 soname=$(objdump -p "$libdir/libhrad.so.$ver" | awk '/SONAME/ {print $2}')
 [ "$soname" = "libhrad.so.${ver%%.*}" ] && [ -L "$libdir/$soname" ] && [ -L "$libdir/libhrad.so" ] \
   || bad "soname '$soname' or its links"
+# The shared library's ABI is hrad.h: every function declared there is exported, nothing else.
+pub=$(grep -oE '\bhr_[a-z0-9_]+\(' "$P/include/hrad.h" | tr -d '(' | sort -u)
+exp=$(nm -D --defined-only "$libdir/libhrad.so.$ver" | awk '{print $NF}' | sort -u)
+npub=$(echo "$pub" | wc -l)
+[ "$npub" -ge 40 ] && [ "$pub" = "$exp" ] ||
+  bad "libhrad.so exports other than the $npub functions of hrad.h: $(comm -3 <(echo "$pub") \
+       <(echo "$exp") | head -5 | tr '\n' ' ')"
 man -l "$P/share/man/man1/hrad.1" 2>/dev/null | grep -q -- '--max-pairs' || bad "man page"
-[ $fail = 0 ] && ok "installed into $P: hrad $ver, ${libdir#$P/}/libhrad.so.$ver ($soname)"
+[ $fail = 0 ] && ok "installed into $P: hrad $ver, ${libdir#$P/}/libhrad.so.$ver ($soname, \
+exporting the $npub functions of hrad.h)"
 
 # The reference: hrad's own surfaces.csv for the Cornell box at the default options.
 (cd "$T" && "$P/bin/hrad" --quiet -o ref cornell) || bad "installed hrad failed"
