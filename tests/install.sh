@@ -15,6 +15,17 @@ set -u
 hrad=$1 src=$2
 build=$(cd "$(dirname "$hrad")" && pwd)
 P=$build/install-test
+# The example is built with the build's compiler and sanitizers (an ASan libhrad needs its
+# runtime in the program too); libFuzzer builds have no use for it.
+cache=$build/CMakeCache.txt
+CC=$(sed -n 's/^CMAKE_C_COMPILER:[A-Z]*=//p' "$cache")
+san=
+grep -q '^HR_SANITIZE:BOOL=ON' "$cache" && san="-fsanitize=address,undefined"
+grep -q '^HR_UBSAN_CLANG:BOOL=ON' "$cache" && san="$san -fsanitize=undefined,float-cast-overflow"
+if grep -q '^HR_FUZZ:BOOL=ON' "$cache"; then
+  echo "install: skipped in a libFuzzer build"
+  exit 0
+fi
 T=$build/install-test-work
 rm -rf "$P" "$T"
 mkdir -p "$T"
@@ -82,7 +93,8 @@ check_example() {
 export PKG_CONFIG_PATH=$libdir/pkgconfig
 pv=$(pkg-config --modversion hrad)
 [ "$pv" = "$ver" ] || bad "pkg-config --modversion: '$pv'"
-cc -std=c11 -Wall -Wextra -Werror "$src/examples/solve.c" $(pkg-config --cflags --libs hrad) \
+"$CC" -std=c11 -Wall -Wextra -Werror $san "$src/examples/solve.c" \
+  $(pkg-config --cflags --libs hrad) \
   -o "$T/solve-pc" 2> "$T/pc.log" || { cat "$T/pc.log"; bad "pkg-config build"; }
 if [ -x "$T/solve-pc" ]; then
   (cd "$T" && LD_LIBRARY_PATH=$libdir ./solve-pc cornell pkgconfig.png > pkgconfig.out) ||
@@ -92,7 +104,7 @@ fi
 
 # 1b. pkg-config --static: hrad.pc's Libs.private and Requires.private link libhrad.a
 libs=$(pkg-config --static --libs-only-other --libs-only-l hrad | sed 's/-lhrad //')
-cc -std=c11 -Wall -Wextra -Werror "$src/examples/solve.c" $(pkg-config --cflags hrad) \
+"$CC" -std=c11 -Wall -Wextra -Werror $san "$src/examples/solve.c" $(pkg-config --cflags hrad) \
   "$libdir/libhrad.a" $libs -o "$T/solve-pc-static" 2> "$T/pcs.log" ||
   { cat "$T/pcs.log"; bad "pkg-config --static build"; }
 if [ -x "$T/solve-pc-static" ]; then
@@ -104,7 +116,8 @@ fi
 
 # 2. CMake, shared and static
 cmake -S "$src/examples" -B "$T/cm" -DCMAKE_PREFIX_PATH="$P" -DCMAKE_BUILD_TYPE=Release \
-  -DCMAKE_C_FLAGS="-Wall -Wextra -Werror" > "$T/cm.log" 2>&1 &&
+  -DCMAKE_C_COMPILER="$CC" -DCMAKE_C_FLAGS="-Wall -Wextra -Werror $san" \
+  -DCMAKE_EXE_LINKER_FLAGS="$san" > "$T/cm.log" 2>&1 &&
   cmake --build "$T/cm" -j2 >> "$T/cm.log" 2>&1 || { tail -30 "$T/cm.log"; bad "CMake build"; }
 for v in solve solve_static; do
   [ -x "$T/cm/$v" ] || continue
