@@ -1747,8 +1747,8 @@ int main(int argc, char **argv) {
   if (c.list_mats) list_materials(&c);
 #ifdef _OPENMP
   /* --threads bounds the whole process, the renderer included: a process-wide setting is the
-   * tool's to make, not the library's (hr_solver_run still sets it too, until its loops take
-   * their count from num_threads clauses). */
+   * tool's to make, not the library's (the solver's loops take their count from num_threads
+   * clauses and leave the process's setting alone). */
   if (c.opt.threads > 0) omp_set_num_threads(c.opt.threads);
 #endif
   if (g_rank != 0) c.quiet = 1, c.snapshots = 0; /* rank 0 prints and writes */
