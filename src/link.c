@@ -339,8 +339,22 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
                       n, pairs, s->opt.max_links);
   row *rows = calloc((size_t)n, sizeof *rows);
   if (!rows) return hr_err_set(err, HR_ERR_NOMEM, "out of memory in initial linking");
+  /* Progress (HR_PHASE_LINK): row i holds the n-1-i pairs (i, j > i); the calling thread (the
+   * team's thread 0) reports the share of pairs done, at most every 0.1 s. */
+  int64_t pairs_done = 0;
+  double t_report = hr_now();
 #pragma omp parallel for schedule(dynamic, 4) if (n > 16) num_threads(s->threads)
-  for (int i = 0; i < n; i++) init_row(s, i, &rows[i]);
+  for (int i = 0; i < n; i++) {
+    init_row(s, i, &rows[i]);
+    int64_t d;
+#pragma omp atomic capture
+    d = pairs_done += n - 1 - i;
+    if (omp_get_thread_num() == 0 && hr_now() - t_report >= 0.1) {
+      t_report = hr_now();
+      hr_solver_progress_report(s, HR_PHASE_LINK, pairs > 0 ? (double)d / pairs : 1);
+    }
+  }
+  hr_solver_progress_report(s, HR_PHASE_LINK, 1);
   int64_t nl = 0;
   int failed = 0;
   for (int i = 0; i < n; i++) {

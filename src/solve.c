@@ -120,6 +120,7 @@ hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solv
 void hr_solver_destroy(hr_solver **ps) {
   if (!ps || !*ps) return;
   hr_solver *s = *ps;
+  hr_solver_set_progress(s, NULL, NULL); /* drops its entry in progress.c's table */
   hr_vis_destroy(&s->vis);
   hr_shaft_index_destroy(&s->shaft);
   free(s->el);
@@ -490,6 +491,17 @@ hr_status hr_solver_set_balance(hr_solver *s, int method, double alpha, double i
   return HR_OK;
 }
 
+/* The share of the multigrid schedule done, for HR_PHASE_SOLVE: the levels of BF_e passed from
+ * bf_start down to bf_low, over their number plus one for the convergence at BF_low; 1 when the
+ * run is done. A lower bound that never decreases. */
+static double schedule_done(const hr_solver *s) {
+  if (s->done) return 1;
+  const hr_options *o = &s->opt;
+  double lf = log(o->bf_factor), total = log(o->bf_start / o->bf_low) / lf + 1;
+  double passed = log(o->bf_start / s->bf_e) / lf;
+  return total > 0 ? fmin(fmax(passed / total, 0), 1) : 0;
+}
+
 hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
   hr_status st;
   /* threads: every parallel loop says num_threads(s->threads); the process-wide OpenMP
@@ -511,6 +523,7 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     s->converged = 0;
     s->started = 1;
   }
+  double t_report = -1; /* the last HR_PHASE_SOLVE report */
   while (!s->done) {
     const double bf_e = s->bf_e;
     double change = 0;
@@ -520,6 +533,10 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     if (s->migrate_seed && !s->done && (st = test_migrate(s, err)) != HR_OK) return st;
     if (!s->done && (st = maybe_balance(s, err)) != HR_OK) return st;
     s->t.total = hr_now() - s->t_start;
+    if (s->done || s->t.total - t_report >= 0.1) {
+      t_report = s->t.total;
+      hr_solver_progress_report(s, HR_PHASE_SOLVE, schedule_done(s));
+    }
     /* Display ({15}) and checkpoints: the state is complete here, and s->bf_e is already the
      * next iteration's. */
     if (cb) {
