@@ -237,6 +237,17 @@ static void test_planted(void) {
   }
 }
 
+/* Z kept incrementally by the annealer equals Z recomputed from scratch after 200,000 warm
+ * proposals (moves and swaps) on the grid with random weights, for several part counts. */
+static void test_incremental(test_graph *t) {
+  static int32_t part[NODES];
+  for (int parts = 2; parts <= 16; parts *= 2) {
+    for (int v = 0; v < NODES; v++) part[v] = v % parts;
+    const double d = hr_partition_anneal_drift(&t->g, parts, 0.3, 9, 200000, part);
+    CHECK(d >= 0 && d < 1e-9, "%d parts: incremental Z off by %g (relative)", parts, d);
+  }
+}
+
 int main(void) {
   static test_graph t;
   test_planted();
@@ -245,6 +256,7 @@ int main(void) {
   test_grid_from_stripes(&t);
   test_grid_from_optimum(&t);
   test_bad_input(&t);
-  test_never_worse(&t); /* last: it reweights the grid */
+  test_never_worse(&t); /* it reweights the grid */
+  test_incremental(&t);
   return t_done("test_partition_anneal");
 }

@@ -322,6 +322,28 @@ static void anneal_run(anneal_state *st, int64_t moves, double t_start, double t
   }
 }
 
+static int valid_input(const hr_graph *g, int nparts, const int32_t *part);
+
+double hr_partition_anneal_drift(const hr_graph *g, int nparts, double alpha, uint64_t seed,
+                                 int64_t moves, int32_t *part) {
+  if (!valid_input(g, nparts, part) || g->n == 0 || nparts < 2 || moves < 0) return -1.0;
+  const size_t n = (size_t)g->n;
+  double *W = malloc((size_t)nparts * sizeof *W), *C = malloc((size_t)nparts * sizeof *C);
+  int32_t *best = malloc(n * sizeof *best), *journal = malloc(n * sizeof *journal);
+  double drift = -1.0;
+  if (W && C && best && journal) {
+    anneal_state st;
+    uint64_t rng = seed;
+    state_init(&st, g, nparts, alpha, part, W, C, best, journal);
+    const double t0 = typical_delta(&st, &rng);
+    anneal_run(&st, moves, t0, t0, &rng); /* a hot walk: many accepted moves and swaps */
+    const double z = hr_partition_cost(g, part, nparts, alpha, NULL, NULL);
+    drift = z > 0.0 ? fabs(st.z - z) / z : fabs(st.z - z);
+  }
+  free(W), free(C), free(best), free(journal);
+  return drift;
+}
+
 /* Anneals 'part' on g from the temperature 'hot' times the typical |delta| down to a thousandth
  * of it, and leaves the best partition seen in 'part'. Returns 0 when out of memory. */
 static int anneal_graph(const hr_graph *g, int nparts, double alpha, int32_t *part, double hot,

@@ -51,4 +51,11 @@ int hr_partition_anneal(const hr_graph *g, int nparts, double alpha, uint64_t se
 int hr_partition_anneal_effort(const hr_graph *g, int nparts, double alpha, uint64_t seed,
                                double effort, int32_t *part);
 
+/* Test of the annealer's bookkeeping: a Metropolis walk of 'moves' proposals (moves and swaps)
+ * at a fixed, warm temperature from 'part' (left at the walk's end), then the relative
+ * difference between the Z the walk kept incrementally and Z recomputed from scratch. -1 on
+ * bad input or out of memory. */
+double hr_partition_anneal_drift(const hr_graph *g, int nparts, double alpha, uint64_t seed,
+                                 int64_t moves, int32_t *part);
+
 #endif
