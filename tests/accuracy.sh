@@ -35,7 +35,7 @@ verify() {
 }
 
 verify cornell cornell
-cb="$shared/scenes/cornell/CornellBox-Original.obj"
+cb="$src/tests/data/cornell/CornellBox-Original.obj" # vendored: CC BY 3.0, see its LICENSE.txt
 if [ -f "$cb" ]; then
   verify "$cb" mcguire
 else

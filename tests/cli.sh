@@ -332,7 +332,7 @@ st=$?
   && ok "--resume of a missing file: usage error" || bad "missing --resume file: status $st: $(cat "$t/err.txt")"
 
 # ---------------------------------------------------------------- third-party scenes
-cb="$shared/scenes/cornell/CornellBox-Original.obj"
+cb="$src/tests/data/cornell/CornellBox-Original.obj" # vendored: CC BY 3.0, see its LICENSE.txt
 if [ -f "$cb" ]; then
   "$hrad" --quiet -o "$t/cb" "$cb" && [ -s "$t/cb/CornellBox-Original.png" ] && ok "CornellBox-Original.obj solves unmodified" \
     || bad "CornellBox-Original.obj failed"

@@ -148,7 +148,7 @@ static void test_up_axis(void) {
 }
 
 static void test_cornell_obj(void) {
-  const char *path = HR_SHARED_DIR "/scenes/cornell/CornellBox-Original.obj";
+  const char *path = HR_SOURCE_DIR "/tests/data/cornell/CornellBox-Original.obj"; /* vendored */
   if (access(path, R_OK) != 0) {
     printf("cornell obj: skipped (%s missing)\n", path);
     return;
