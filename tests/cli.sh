@@ -147,6 +147,38 @@ if "$hrad" -o "$t/degen-out" "$t/degen.obj" 2> "$t/err.txt" >/dev/null && grep -
 else
   bad "degenerate polygon: $(cat "$t/err.txt")"
 fi
+# Repeated warnings are summarised: of 10 degenerate faces, 3 are named, then "... and 7 more".
+{ printf "$base"; printf 'v 2 0 0\n'; for _ in $(seq 10); do echo 'f 1 2 9'; done; } > "$t/degen10.obj"
+if "$hrad" -o "$t/degen10-out" "$t/degen10.obj" 2> "$t/err.txt" > /dev/null; then
+  nd=$(grep -c '^hrad: warning: .*degen10.obj:[0-9]*: degenerate polygon skipped$' "$t/err.txt")
+  ns=$(grep -c '^hrad: warning: .*degen10.obj:15: degenerate .* and 7 more like it$' "$t/err.txt")
+  nw=$(grep -c '^hrad: warning: ' "$t/err.txt")
+  [ "$nd" = 3 ] && [ "$ns" = 1 ] && [ "$nw" = 4 ] \
+    && ok "10 degenerate faces: 3 warnings, then '$(grep 'more like it' "$t/err.txt")'" \
+    || bad "10 degenerate faces: $nd detailed, $ns summary, $nw warnings: $(cat "$t/err.txt")"
+else
+  bad "10 degenerate faces: run failed: $(cat "$t/err.txt")"
+fi
+# Progress: stderr that is not a terminal never gets a '\r' (logs stay clean); on a terminal (a
+# pseudo-terminal from util-linux script) one line is redrawn with '\r' (a bare '\r', not the
+# terminal's "\r\n") and shows a share in %; --no-progress leaves only the iteration lines.
+"$hrad" -o "$t/np" --size 64x48 cornell 2> "$t/np.txt" > /dev/null
+! grep -q $'\r' "$t/np.txt" && grep -q '^iter' "$t/np.txt" && ok "stderr not a terminal: no '\r'" \
+  || bad "stderr not a terminal: $(grep -c $'\r' "$t/np.txt") lines with '\r'"
+if command -v script > /dev/null; then
+  script -qec "$hrad -o '$t/tty' --size 64x48 cornell" /dev/null < /dev/null > "$t/tty.txt" 2>&1
+  ncr=$(sed 's/\r$//' "$t/tty.txt" | grep -c $'\r')
+  pct=$(tr '\r' '\n' < "$t/tty.txt" | grep -E '^(initial linking|refining) +\[[#.]+\] +[0-9]+%' | tail -1)
+  [ "$ncr" -gt 0 ] && [ -n "$pct" ] && tr '\r' '\n' < "$t/tty.txt" | grep -q '^iter' \
+    && ok "terminal: a progress line redrawn with '\\r' ($pct)" \
+    || bad "terminal: $ncr bare '\\r', progress line '$pct': $(head -c 600 "$t/tty.txt")"
+  script -qec "$hrad --no-progress -o '$t/tty' --size 64x48 cornell" /dev/null < /dev/null > "$t/tty.txt" 2>&1
+  ncr=$(sed 's/\r$//' "$t/tty.txt" | grep -c $'\r')
+  [ "$ncr" = 0 ] && grep -q '^iter' "$t/tty.txt" && ok "terminal with --no-progress: no progress line" \
+    || bad "terminal with --no-progress: $ncr bare '\\r'"
+else
+  echo "SKIP progress on a terminal: 'script' (util-linux) not found"
+fi
 # A missing MTL is a warning (grey default), documented in obj.c.
 "$hrad" -o "$t/nomtl-out" "$t/nomtl.obj" 2> "$t/err.txt" >/dev/null
 grep -q "cannot open material library" "$t/err.txt" && ok "missing MTL warns" || bad "missing MTL: $(cat "$t/err.txt")"
@@ -222,7 +254,7 @@ run_bg "$t/int"
 kill -INT $pid
 wait $pid
 st=$?
-msgs=$(grep -v '^iter' "$t/bg.txt" | grep -v "^hrad: scene '")
+msgs=$(grep -v '^iter' "$t/bg.txt" | grep -v "^hrad: scene '" | grep -vE '^hrad: (initial linking|refining) [0-9]+%')
 [ "$st" = 130 ] && [ "$msgs" = "hrad: interrupted by SIGINT: stopping without writing outputs (once more to stop at once)" ] &&
   [ ! -e "$t/int" ] && no_staging && ok "SIGINT: status 130, '$msgs', nothing left" \
   || bad "SIGINT: status $st, stderr: $msgs; left: $(ls -a "$t")"

@@ -88,6 +88,7 @@ typedef struct cli {
   const char *scene_arg;
   const char *outdir; /* -o as given */
   int quiet;
+  int no_progress; /* --no-progress: no progress bar or progress lines */
   int snapshots;
   int snap_collect; /* distributed run with snapshots: collect the leaves each iteration */
   int hdr;
@@ -151,6 +152,241 @@ static sigset_t g_sigs;           /* the signals the signal thread takes */
 
 static void lock(void) { pthread_mutex_lock(&g_lock); }
 static void unlock(void) { pthread_mutex_unlock(&g_lock); }
+
+static double now_s(void) {
+  struct timespec t;
+  clock_gettime(CLOCK_MONOTONIC, &t);
+  return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
+}
+
+/* ---------------------------------------------------------------- progress and warnings */
+
+/* Progress (issue 13). On a terminal, one line redrawn with '\r' (the phase, a bar, the share
+ * done, the seconds spent and, past 2%, an estimate of those left), erased before any other
+ * line is printed and redrawn after it; the per-iteration lines stay as they were. When stderr
+ * is not a terminal, a plain line at most every PLAIN_EVERY seconds of a phase, never '\r'. Only
+ * rank 0 draws (the others are --quiet); --quiet and --no-progress draw nothing. */
+#define PLAIN_EVERY 5.0  /* seconds between plain progress lines */
+#define BAR_WIDTH 20
+#define PH_WRITE 100     /* the phase after the solve: writing the outputs (no fraction) */
+
+typedef struct progress {
+  int tty;         /* stderr is a terminal */
+  int phase;       /* HR_PHASE_*, PH_WRITE, or -1 before the first report */
+  double t_phase;  /* when the current phase began: the run's start or the previous's end */
+  double t_plain;  /* when the last plain line was printed */
+  double fraction; /* of the current phase */
+  int drawn;       /* the line is to be on the terminal (between reports too) */
+  int shown;       /* characters of the line on the terminal now (0: none) */
+} progress;
+
+static progress g_prog = {.phase = -1};
+static pthread_mutex_t g_out = PTHREAD_MUTEX_INITIALIZER; /* stderr lines vs the progress line */
+
+/* Erases the progress line from the terminal (caller holds g_out). */
+static void progress_erase(void) {
+  if (!g_prog.shown) return;
+  fprintf(stderr, "\r%*s\r", g_prog.shown, "");
+  g_prog.shown = 0;
+}
+
+static void tty_line(char *out, size_t n, int phase, double fraction, double secs);
+
+/* Draws the progress line of the current phase, as of now (caller holds g_out). */
+static void progress_draw(void) {
+  if (!g_prog.tty || !g_prog.drawn) return;
+  char line[192];
+  tty_line(line, sizeof line, g_prog.phase, g_prog.fraction, now_s() - g_prog.t_phase);
+  fprintf(stderr, "\r%s", line);
+  g_prog.shown = (int)strlen(line);
+  fflush(stderr);
+}
+
+/* Prints one line "FMT\n" to stderr without garbling the progress line. */
+static void say(const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 1, 2)))
+#endif
+    ;
+static void say(const char *fmt, ...) {
+  va_list ap;
+  va_start(ap, fmt);
+  pthread_mutex_lock(&g_out);
+  progress_erase();
+  vfprintf(stderr, fmt, ap);
+  fputc('\n', stderr);
+  progress_draw();
+  pthread_mutex_unlock(&g_out);
+  va_end(ap);
+}
+
+/* Ends the progress display: the line is erased and not drawn again. */
+static void progress_stop(void) {
+  pthread_mutex_lock(&g_out);
+  progress_erase();
+  g_prog.drawn = 0;
+  pthread_mutex_unlock(&g_out);
+}
+
+static const char *phase_name(int phase) {
+  return phase == HR_PHASE_LINK    ? "initial linking"
+         : phase == HR_PHASE_SOLVE ? "refining"
+                                   : "writing outputs";
+}
+
+/* "12.3 s, about 9 s left" for 'secs' spent on 'fraction' of a phase. */
+static void eta_text(char *out, size_t n, double secs, double fraction) {
+  int k = snprintf(out, n, "%.1f s", secs);
+  if (k < 0 || (size_t)k >= n || !(fraction > 0.02) || fraction >= 1) return;
+  const double left = secs * (1 - fraction) / fraction;
+  if (left < 100)
+    snprintf(out + k, n - (size_t)k, ", about %.0f s left", ceil(left));
+  else
+    snprintf(out + k, n - (size_t)k, ", about %.0f min left", ceil(left / 60));
+}
+
+/* The terminal line: "initial linking  [#######.............]  58%  12.3 s, about 9 s left",
+ * or for PH_WRITE "writing outputs ...". */
+static void tty_line(char *out, size_t n, int phase, double fraction, double secs) {
+  if (phase == PH_WRITE) {
+    snprintf(out, n, "%s ...", phase_name(phase));
+    return;
+  }
+  char bar[BAR_WIDTH + 1], eta[64];
+  const int full = (int)(fraction * BAR_WIDTH);
+  for (int i = 0; i < BAR_WIDTH; i++) bar[i] = i < full ? '#' : '.';
+  bar[BAR_WIDTH] = 0;
+  eta_text(eta, sizeof eta, secs, fraction);
+  snprintf(out, n, "%-15s  [%s] %3.0f%%  %s", phase_name(phase), bar, floor(100 * fraction),
+           eta);
+}
+
+/* The solver's progress callback (hr_progress_fn). */
+static void on_progress(void *ud, hr_phase phase, double fraction) {
+  (void)ud;
+  const double t = now_s();
+  pthread_mutex_lock(&g_out);
+  if ((int)phase != g_prog.phase) {
+    g_prog.phase = (int)phase;
+    g_prog.t_plain = g_prog.t_phase;
+  }
+  const double secs = t - g_prog.t_phase;
+  g_prog.fraction = fraction;
+  if (g_prog.tty) {
+    g_prog.drawn = fraction < 1; /* erased at the end of each phase */
+    progress_erase();
+    progress_draw();
+  } else if (fraction < 1 && t - g_prog.t_plain >= PLAIN_EVERY) {
+    char eta[64];
+    eta_text(eta, sizeof eta, secs, fraction);
+    fprintf(stderr, "hrad: %s %.0f%% (%s)\n", phase_name(phase), floor(100 * fraction),
+            eta);
+    g_prog.t_plain = t;
+  }
+  if (fraction >= 1) g_prog.t_phase = t; /* the next phase starts now */
+  pthread_mutex_unlock(&g_out);
+}
+
+/* Sets up the progress display of solver 's' (rank 0, unless --quiet or --no-progress). */
+static void progress_start(hr_solver *s, int show) {
+  g_prog.tty = show && isatty(2);
+  g_prog.t_phase = now_s();
+  if (show) hr_solver_set_progress(s, on_progress, NULL); /* fails only out of memory: no bar */
+}
+
+/* On a terminal: "writing outputs ..." until progress_stop. */
+static void progress_writing(void) {
+  if (!g_prog.tty) return;
+  pthread_mutex_lock(&g_out);
+  g_prog.phase = PH_WRITE;
+  g_prog.drawn = 1;
+  progress_erase();
+  progress_draw();
+  pthread_mutex_unlock(&g_out);
+}
+
+/* Repeated warnings. A warning's kind is its text with every run of digits read as one '#',
+ * quoted text ('...') as one '*' and parenthesised text left out: "s.obj:15: degenerate polygon
+ * skipped (extent 1e-09 below 1e-06)" and "s.obj:230: degenerate polygon skipped" are one kind,
+ * warnings about different files are not. The first WARN_SHOWN of a kind are printed; the
+ * others are counted, and warn_summary prints one line per kind that had more. */
+#define WARN_SHOWN 3
+#define WARN_KINDS 256 /* kinds remembered; warnings of later kinds are all printed */
+
+typedef struct warn_kind {
+  char *key, *first; /* the kind, and the text of its first warning */
+  long n;            /* warnings of this kind so far */
+} warn_kind;
+
+static warn_kind g_warn[WARN_KINDS];
+static int g_nwarn;
+
+/* The kind of warning 'msg' (see above) into out[n]. */
+static void warn_key(const char *msg, char *out, size_t n) {
+  size_t k = 0;
+  int paren = 0;
+  for (const char *p = msg; *p && k + 1 < n; p++) {
+    if (*p == '(') paren++;
+    else if (*p == ')' && paren > 0) paren--;
+    else if (paren) continue;
+    else if (*p >= '0' && *p <= '9') {
+      while (p[1] >= '0' && p[1] <= '9') p++;
+      out[k++] = '#';
+    } else if (*p == '\'' && strchr(p + 1, '\'')) {
+      p = strchr(p + 1, '\'');
+      out[k++] = '*';
+    } else {
+      out[k++] = *p;
+    }
+  }
+  out[k] = 0;
+}
+
+/* The entry of kind 'key' (added if new); NULL when the table is full or memory is short. */
+static warn_kind *warn_find(const char *key, const char *msg) {
+  for (int i = 0; i < g_nwarn; i++)
+    if (!strcmp(g_warn[i].key, key)) return &g_warn[i];
+  if (g_nwarn == WARN_KINDS) return NULL;
+  warn_kind *w = &g_warn[g_nwarn];
+  w->key = strdup(key);
+  w->first = strdup(msg);
+  w->n = 0;
+  if (!w->key || !w->first) {
+    free(w->key);
+    free(w->first);
+    return NULL;
+  }
+  g_nwarn++;
+  return w;
+}
+
+/* The loader's warning sink (hr_log_fn). */
+static void warn_cb(void *ud, const char *msg) {
+  (void)ud;
+  char key[512];
+  warn_key(msg, key, sizeof key);
+  pthread_mutex_lock(&g_out);
+  warn_kind *w = warn_find(key, msg);
+  const int show = !w || ++w->n <= WARN_SHOWN;
+  pthread_mutex_unlock(&g_out);
+  if (show) say("hrad: warning: %s", msg);
+}
+
+/* For each kind with more than WARN_SHOWN warnings, "hrad: warning: FIRST ... and N more like
+ * it"; then forgets them all. */
+static void warn_summary(void) {
+  pthread_mutex_lock(&g_out);
+  const int n = g_nwarn;
+  g_nwarn = 0;
+  pthread_mutex_unlock(&g_out);
+  for (int i = 0; i < n; i++) {
+    warn_kind *w = &g_warn[i];
+    if (w->n > WARN_SHOWN) say("hrad: warning: %s ... and %ld more like it", w->first,
+                               w->n - WARN_SHOWN);
+    free(w->key);
+    free(w->first);
+  }
+}
 
 /* Prints "hrad: MSG" and the --help hint, exits with status 2 (before anything was written). */
 static void die_usage(const char *fmt, ...)
@@ -235,7 +471,11 @@ static void fail(const char *fmt, ...) {
     }
   }
   if (k < sizeof out) snprintf(out + k, sizeof out - k, "%s", p);
-  if (g_rank == 0 || !g_together) fprintf(stderr, "hrad: %s\n", out);
+  if (g_rank == 0 || !g_together) {
+    warn_summary();
+    progress_stop();
+    fprintf(stderr, "hrad: %s\n", out);
+  }
   remove_stage(c);
   leave(1);
 }
@@ -407,6 +647,7 @@ static const char *sig_name(int sig) {
 /* Ends the process by 'sig' with its default action (so a calling shell sees 128+sig and stops a
  * loop on Ctrl-C); _exit(128+sig) should that not happen. */
 static void die_by_signal(int sig) {
+  progress_stop();
   fflush(stderr);
   signal(sig, SIG_DFL);
   sigset_t one;
@@ -428,10 +669,9 @@ static void *sig_thread(void *arg) {
       /* mpirun passes a signal to every rank: one line, from rank 0; and a SIGTERM under
        * mpirun is mpirun ending the job after another rank failed, which that rank reported */
       if (g_rank == 0 && !(g_dist && sig == SIGTERM))
-        fprintf(stderr,
-              "hrad: interrupted by %s: stopping without writing outputs (once more to stop at "
-              "once)\n",
-              sig_name(sig));
+        say("hrad: interrupted by %s: stopping without writing outputs (once more to stop at "
+            "once)",
+            sig_name(sig));
       continue;
     }
     lock(); /* not while a file is being written or the set is being committed */
@@ -502,6 +742,8 @@ static void usage(void) {
       "  --hdr                also write SCENE.pfm (linear radiosity image)\n"
       "  --snapshots          write DIR/iter-NN.png after every iteration while solving\n"
       "  --quiet              no progress lines, warnings or timing table\n"
+      "  --no-progress        no progress bar (on a terminal) or progress lines with the\n"
+      "                       time left (otherwise, every 5 s); the iteration lines stay\n"
       "\n"
       "Checkpoints (README 'Long runs'):\n"
       "  --checkpoint FILE    save the solver's state to FILE (atomically: a kill leaves the\n"
@@ -565,9 +807,9 @@ static void usage(void) {
       "\n"
       "Exit status: 0 done, 1 bad input or a failure (nothing written), 2 usage error;\n"
       "interrupted by a signal: 128+N (Ctrl-C: 130; a second Ctrl-C stops at once).\n",
-      scenes, MIN_SIDE, MAX_SIDE, MAX_PIXELS, CKPT_EVERY, MIN_EMIT, MAX_EMIT, d.bf_low, d.bf_start, d.bf_factor,
-      d.b_eps, d.b_max, d.rays, (unsigned long long)d.seed, MAX_THREADS, INT_MAX, d.max_iters,
-      d.max_links);
+      scenes, MIN_SIDE, MAX_SIDE, MAX_PIXELS, CKPT_EVERY, MIN_EMIT, MAX_EMIT, d.bf_low, d.bf_start,
+      d.bf_factor, d.b_eps, d.b_max, d.rays, (unsigned long long)d.seed, MAX_THREADS, INT_MAX,
+      d.max_iters, d.max_links);
 }
 
 /* A real option value: a finite number and nothing else. */
@@ -762,6 +1004,7 @@ static void parse_args(cli *c, int argc, char **argv) {
       c->outdir = NEXT();
       if (!*c->outdir) die_usage("%s: empty directory name", a);
     } else if (!strcmp(a, "--quiet")) c->quiet = 1;
+    else if (!strcmp(a, "--no-progress")) c->no_progress = 1;
     else if (!strcmp(a, "--snapshots")) c->snapshots = 1;
     else if (!strcmp(a, "--hdr")) c->hdr = 1;
     else if (!strcmp(a, "--no-relax")) o->relax = 0;
@@ -873,11 +1116,6 @@ static void parse_args(cli *c, int argc, char **argv) {
     die_usage("--size %dx%d: the images need about %.1f GB, more than this machine's %.1f GB of "
               "memory allows",
               c->w, c->h, need / 1e9, mem / 1e9);
-}
-
-static void warn_cb(void *ud, const char *msg) {
-  (void)ud;
-  fprintf(stderr, "hrad: warning: %s\n", msg);
 }
 
 /* ---------------------------------------------------------------- the output directory */
@@ -1319,12 +1557,6 @@ static void snapshot(cli *c, const hr_solver *s, int iter) {
 }
 /* ---------------------------------------------------------------- --verify, --verify-image */
 
-static double now_s(void) {
-  struct timespec t;
-  clock_gettime(CLOCK_MONOTONIC, &t);
-  return (double)t.tv_sec + 1e-9 * (double)t.tv_nsec;
-}
-
 static double norm3(const double v[3]) { return sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]); }
 
 /* One polygon of the comparison between hrad and the path tracer. */
@@ -1548,15 +1780,13 @@ static void save_ckpt(cli *c, const hr_solver *s, int iter) {
   c->ckpt_last = now_s();
   c->ckpt_iter = iter; /* the same on every rank, written or not */
   c->ckpt_ok = hr_solver_checkpoint(s, c->ckpt, &err) == HR_OK;
-  if (!c->ckpt_ok && g_rank == 0)
-    fprintf(stderr, "hrad: warning: checkpoint not written: %s\n", err.msg);
+  if (!c->ckpt_ok && g_rank == 0) say("hrad: warning: checkpoint not written: %s", err.msg);
 }
 
 static int on_iter(void *ud, const hr_solver *s, const hr_iter_info *it) {
   cli *c = ud;
   if (!c->quiet)
-    fprintf(stderr,
-            "iter %3d  BF_e %.3e  elements %9lld  links %10lld  max change %.3e  %8.3f s\n",
+    say("iter %3d  BF_e %.3e  elements %9lld  links %10lld  max change %.3e  %8.3f s",
             it->iter, it->bf_e, (long long)it->elements, (long long)it->links, it->max_change,
             it->elapsed_s);
   /* with MPI, every rank decides alike: a signal seen by any rank, rank 0's clock */
@@ -1565,8 +1795,8 @@ static int on_iter(void *ud, const hr_solver *s, const hr_iter_info *it) {
     if (c->ckpt) {
       save_ckpt(c, s, it->iter);
       if (c->ckpt_ok && g_rank == 0)
-        fprintf(stderr, "hrad: saved iteration %d to %s; continue with --resume %s\n", it->iter,
-                c->ckpt, c->ckpt);
+        say("hrad: saved iteration %d to %s; continue with --resume %s", it->iter, c->ckpt,
+            c->ckpt);
     }
     return 1;
   }
@@ -1710,6 +1940,7 @@ static void apply_emit(cli *c, hr_scene *scene) {
 static void list_materials(const cli *c) {
   hr_log log = {c->quiet ? NULL : warn_cb, NULL};
   hr_scene *scene = load_scene(c, c->list_mats, &log);
+  warn_summary();
   for (int k = 0; k < hr_scene_material_count(scene); k++)
     printf("%s\n", scene->mats[hr_scene_material_at(scene, k)].name);
   hr_scene_destroy(&scene);
@@ -1768,6 +1999,7 @@ int main(int argc, char **argv) {
   hr_err err = {{0}};
   hr_log log = {c.quiet ? NULL : warn_cb, NULL};
   hr_scene *scene = load_scene(&c, c.scene_arg, &log);
+  warn_summary();
   hr_status st;
   check_stop(&c);
   apply_emit(&c, scene);
@@ -1805,7 +2037,10 @@ int main(int argc, char **argv) {
             lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
   }
   c.ckpt_last = now_s();
+  progress_start(s, !c.quiet && !c.no_progress);
   st = hr_solver_run(s, on_iter, &c, &err);
+  hr_solver_set_progress(s, NULL, NULL);
+  progress_stop();
   const int nranks = hr_dist_size(g_dist);
   if (nranks > 1 && st == HR_OK) st = hr_solver_collect(s, &err); /* the leaves to rank 0 */
   if (st == HR_OK && c.dump_graph) st = hr_solver_dump_graph(s, c.dump_graph, &err);
@@ -1837,6 +2072,7 @@ int main(int argc, char **argv) {
   char path[sizeof c.stage + 300], name[PATH_MAX];
   c.rep = open_memstream(&c.rep_buf, &c.rep_len);
   if (!c.rep) c.rep = stderr;
+  progress_writing();
   lock();
   if (c.outputs & OUT_CSV)
     check(hr_report_csv(stage_file(&c, "surfaces.csv", path, sizeof path), s, &err), &err);
@@ -1846,6 +2082,7 @@ int main(int argc, char **argv) {
   check_stop(&c);
   snprintf(name, sizeof name, "%s.png", scene->name);
   write_pictures(&c, s, name, 1);
+  progress_stop();
   check_stop(&c);
   if (c.verify_paths) verify_polys(&c, s);
   check_stop(&c);
