@@ -312,8 +312,8 @@ typedef enum {
 typedef void (*hr_progress_fn)(void *ud, hr_phase phase, double fraction);
 /* Sets (or with fn NULL, removes) the progress callback of 's'; call it before hr_solver_run,
  * and with fn NULL before destroying 's'. HR_ERR_INVALID when 's' is NULL, HR_ERR_NOMEM.
- * Note: hr_solver_run does not call it yet (the calls land with the rewrite of solve.c and
- * link.c, issue 13); hr_solver_progress_report is the entry point those calls use. */
+ * Initial linking reports HR_PHASE_LINK, the iterations HR_PHASE_SOLVE (in a distributed run,
+ * each rank reports its own share of the linking). */
 hr_status hr_solver_set_progress(hr_solver *s, hr_progress_fn fn, void *ud);
 /* Delivers one report to the callback set for 's' (none: nothing happens). For the solver's
  * own use; can't fail. */
