@@ -29,6 +29,7 @@
  * assimp keeps its messages in a global string: imports are serialised by a mutex. */
 #include "hrad.h"
 #include "gltfext.h"
+#include "scene_impl.h"
 #include "texture.h"
 
 #include <assimp/cimport.h>
@@ -150,16 +151,6 @@ static hr_status check_format(const char *path, const char *ext, long long size,
   return HR_OK;
 }
 
-/* Base name of 'path' without its extension ("scene" if empty); NULL when out of memory. */
-static char *base_name(const char *path) {
-  const char *b = strrchr(path, '/');
-  b = b ? b + 1 : path;
-  size_t n = strlen(b);
-  const char *dot = strrchr(b, '.');
-  if (dot && dot > b) n = (size_t)(dot - b);
-  if (n == 0) return strdup("scene");
-  return strndup(b, n);
-}
 
 /* 'name' from assimp as a C string in 'out': control characters become '?' (messages and
  * outputs stay one line), long names are cut. */
@@ -590,7 +581,7 @@ hr_status hr_scene_import(const char *path, const hr_log *log, hr_scene **out, h
   c.path = path;
   c.log = log;
   c.err = err;
-  char *name = base_name(path);
+  char *name = hr_scene_name_of(path);
   if (!name || hr_scene_create(name, &c.s) != HR_OK) {
     free(name);
     return hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);

@@ -77,6 +77,7 @@
  * "PATH:LINE: degenerate polygon skipped (extent X below 1e-30)"): squares of such sizes underflow,
  * which gave normals of length 1.0000056 (extent 1e-80) or silently zero areas.
  */
+#include "scene_impl.h"
 #include "hrad.h"
 #include "texture.h"
 #include "vec.h"
@@ -980,8 +981,7 @@ static hr_status parse_obj_text(obj_ctx *c, char *buf, size_t len) {
   return HR_OK;
 }
 
-/* Scene name from 'path': base name without directory and last extension ("scene" if empty). */
-static char *scene_name(const char *path) {
+char *hr_scene_name_of(const char *path) {
   const char *b = strrchr(path, '/');
   b = b ? b + 1 : path;
   size_t n = strlen(b);
@@ -1009,7 +1009,7 @@ static hr_status parse_owned(char *buf, size_t len, const char *path, const hr_l
   c.mem_mode = mem_mode;
   c.mem_mtl = mtl;
   c.mem_mtl_len = mlen;
-  char *name = scene_name(path);
+  char *name = hr_scene_name_of(path);
   if (!name || hr_scene_create(name, &c.s) != HR_OK) {
     free(name);
     return hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
