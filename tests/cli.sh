@@ -382,5 +382,26 @@ else
   echo "SKIP $conf not found (../shared is absent)"
 fi
 
+# ---------------------------------------------------------------- light in familiar units
+# --emit NAME=POWERW / NAME=FLUXlm: the radiosity is the power over the material's area. The
+# Cornell box's light is one 0.47 x 0.38 quad (0.1786 m^2): 1 W gives 1 / 0.1786 = 5.59910 W/m^2;
+# 683 lm is 1 W; 100 W gives 100 times as much.
+cbv="$src/tests/data/cornell/CornellBox-Original.obj"
+rad() { "$hrad" --max-iters 1 --outputs csv -o "$t/pw" --emit "light=$1" "$cbv" 2>&1 \
+  | sed -n 's/^hrad: --emit light: .* radiosity \([0-9.e+-]*\) W\/m^2$/\1/p'; }
+r1=$(rad 1W) r2=$(rad 683lm) r3=$(rad 100W)
+if awk -v a="$r1" -v b="$r2" -v c="$r3" 'BEGIN { exit !(a > 5.5990 && a < 5.5992 && a == b &&
+    c / a > 99.999 && c / a < 100.001) }'; then
+  ok "--emit light=1W: $r1 W/m^2 (1 / 0.1786 m^2), 683lm the same, 100W: $r3"
+else
+  bad "--emit in watts and lumens: 1W '$r1', 683lm '$r2', 100W '$r3'"
+fi
+for v in 0W -3W xW 5lmx 1e40W; do
+  "$hrad" --quiet -o "$t/pw2" --emit "light=$v" "$cbv" 2> "$t/err.txt"
+  st=$?
+  [ "$st" = 2 ] && [ "$(grep -c '^hrad:' "$t/err.txt")" = 1 ] && [ ! -e "$t/pw2" ] \
+    && ok "--emit light=$v: one usage line" || bad "--emit light=$v: status $st: $(cat "$t/err.txt")"
+done
+
 echo "$passes passed, $fails failed"
 [ "$fails" = 0 ]

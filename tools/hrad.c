@@ -778,7 +778,8 @@ static void usage(void) {
       "\n"
       "Scene:\n"
       "  --emit NAME=R,G,B    make material NAME emit radiosity R,G,B (W/m^2: 0 or %g..%g);\n"
-      "                       repeatable\n"
+      "                       repeatable; or NAME=60W (the radiant power of all its polygons\n"
+      "                       together) or NAME=800lm (their luminous flux, at 683 lm/W), white\n"
       "  --list-materials FILE  print the material names of scene FILE, one per line, and exit\n"
       "  --scale S            multiply every coordinate by S (1e-9..1e9; e.g. 0.001 for a scene\n"
       "                       in millimetres, to get metres); radiosity is per m^2 of the result\n"
@@ -885,12 +886,43 @@ static void parse_camera(cli *c, const char *v) {
   c->have_camera = 1;
 }
 
+/* Luminous efficacy used to turn lumens into watts: 683 lm/W, the definition of the lumen at
+ * 555 nm (a white source is less efficient per watt; see README, "Units"). */
+#define LM_PER_W 683.0
+
+/* The value of --emit NAME=VALUE in familiar units: "60W" (the radiant power of all polygons of
+ * the material together) or "800lm" (their luminous flux, at 683 lm/W). Returns the unit (1 W,
+ * 2 lm) and the power in watts in '*watts', or 0 when VALUE is R,G,B. */
+static int parse_power(const char *val, double *watts) {
+  const size_t n = strlen(val);
+  int unit = 0;
+  size_t k = n;
+  if (n > 1 && val[n - 1] == 'W') unit = 1, k = n - 1;
+  else if (n > 2 && !strcmp(val + n - 2, "lm")) unit = 2, k = n - 2;
+  if (!unit) return 0;
+  char num[64];
+  if (k >= sizeof num) return -1;
+  memcpy(num, val, k);
+  num[k] = '\0';
+  char *end;
+  errno = 0;
+  const double x = strtod(num, &end);
+  if (end == num || *end || errno || !(x > 0) || !isfinite(x)) return -1;
+  *watts = unit == 2 ? x / LM_PER_W : x;
+  return unit;
+}
+
 static void parse_emit(cli *c, const char *v) {
   const char *eq = strrchr(v, '=');
-  double rgb[3];
-  if (!eq || eq == v || !parse_vec(eq + 1, rgb, 3) || strchr(eq + 1, ':'))
-    die_usage("--emit: expected NAME=R,G,B, got '%s'", v);
-  for (int k = 0; k < 3; k++)
+  double rgb[3], watts = 0;
+  const int unit = eq ? parse_power(eq + 1, &watts) : 0;
+  if (unit < 0 || (unit > 0 && !(watts >= MIN_EMIT && watts <= MAX_EMIT)))
+    die_usage("--emit: a power must be a number > 0 followed by W or lm (at most %g W), got "
+              "'%s'", MAX_EMIT, v);
+  if (unit > 0) rgb[0] = rgb[1] = rgb[2] = -watts; /* negative: a power, spread in apply_emit */
+  else if (!eq || eq == v || !parse_vec(eq + 1, rgb, 3) || strchr(eq + 1, ':'))
+    die_usage("--emit: expected NAME=R,G,B, NAME=POWERW or NAME=FLUXlm, got '%s'", v);
+  for (int k = 0; k < 3 && unit == 0; k++)
     if (rgb[k] != 0 && !(rgb[k] >= MIN_EMIT && rgb[k] <= MAX_EMIT))
       die_usage("--emit: radiosity must be 0 or in [%g, %g], got '%s'", MIN_EMIT, MAX_EMIT, v);
   if (c->nemit == c->cap_emit) {
@@ -1921,6 +1953,24 @@ static void material_list(const hr_scene *sc, char *out, size_t n) {
   }
 }
 
+/* --emit NAME=POWER: the radiant exitance that gives the material's polygons together that
+ * power (W over their area, white), in place of the negative power parse_emit left. */
+static void emit_power(cli *c, const hr_scene *scene, int i) {
+  const double watts = -c->emit_rgb[i][0];
+  double area = 0;
+  for (int k = 0; k < scene->nsurfs; k++)
+    if (!strcmp(scene->mats[scene->surfs[k].material].name, c->emit_name[i]))
+      area += scene->surfs[k].area;
+  const double m = area > 0 ? watts / area : 0;
+  if (!(area > 0) || !(m >= MIN_EMIT && m <= MAX_EMIT))
+    fail("--emit: %s: %g W over %g m^2 of material '%s' is not a radiosity in [%g, %g] W/m^2",
+         scene->name, watts, area, c->emit_name[i], MIN_EMIT, MAX_EMIT);
+  for (int k = 0; k < 3; k++) c->emit_rgb[i][k] = m;
+  if (!c->quiet)
+    fprintf(stderr, "hrad: --emit %s: %g W over %g m^2: radiosity %g W/m^2\n", c->emit_name[i],
+            watts, area, m);
+}
+
 /* --emit: each name must be a material of the scene; an unknown one lists those that exist. */
 static void apply_emit(cli *c, hr_scene *scene) {
   hr_err err = {{0}};
@@ -1931,6 +1981,7 @@ static void apply_emit(cli *c, hr_scene *scene) {
       fail("--emit: %s has no material named '%s'; its materials: %s", scene->name,
            c->emit_name[i], list);
     }
+    if (c->emit_rgb[i][0] < 0) emit_power(c, scene, i);
     check(hr_scene_set_emit(scene, c->emit_name[i], c->emit_rgb[i], &err), &err);
     free(c->emit_name[i]);
   }
