@@ -353,8 +353,10 @@ int hr_dist_any(const hr_dist *d, int flag);
  * rank; NULL spreads the surfaces by area, largest first, each to the rank with the least area
  * so far. A non-zero 'scatter' instead sends every element, at any depth, to a rank drawn from
  * (scatter, its gid): one surface's tree spread over every rank. Every rank then calls
- * hr_solver_run; each holds every element's radiosity afterwards (for outputs) but only its own
- * links. Results, counts and outputs are bit-identical to one process for any assignment.
+ * hr_solver_run; each holds its own elements and links and ghost copies of what its links see,
+ * every root's radiosity afterwards (hr_solver_poly_radiosity works on every rank), and, after
+ * hr_solver_collect, rank 0 every leaf. Results, counts and outputs are bit-identical to one
+ * process for any assignment.
  * HR_ERR_INVALID for a bad owner. */
 hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uint64_t scatter,
                              hr_err *err);
