@@ -203,7 +203,7 @@ static hr_graph view(const bgraph *g) {
 }
 
 /* Every rank gets rank 0's graph (annealing runs a chain on each). A collective. */
-static hr_status share_graph(hr_solver *s, bgraph *g) {
+static void share_graph(hr_solver *s, bgraph *g) {
   int64_t hdr[2] = {g->n, g->n ? g->xadj[g->n] : 0};
   hr_dist_bcast(s->dist, hdr, sizeof hdr);
   if (s->rank != 0) {
@@ -221,7 +221,6 @@ static hr_status share_graph(hr_solver *s, bgraph *g) {
   hr_dist_bcast(s->dist, g->xadj, (size_t)(hdr[0] + 1) * sizeof *g->xadj);
   hr_dist_bcast(s->dist, g->adj, (size_t)hdr[1] * sizeof *g->adj);
   hr_dist_bcast(s->dist, g->c, (size_t)hdr[1] * sizeof *g->c);
-  return HR_OK;
 }
 
 /* The partition of 'method' for P parts into part[] (rank 0's graph; for annealing every

@@ -338,71 +338,35 @@ static unsigned char *slurp(const char *path, size_t *len, hr_err *err) {
   return buf;
 }
 
-/* A gid -> element index table (open addressing). */
-typedef struct gid_map {
-  uint64_t *key;
-  int32_t *val;
-  size_t mask;
-} gid_map;
-
-static int map_init(gid_map *m, int64_t n) {
-  size_t cap = 64;
-  while (cap < (size_t)n * 2) cap *= 2;
-  m->key = calloc(cap, sizeof *m->key);
-  m->val = malloc(cap * sizeof *m->val);
-  m->mask = cap - 1;
-  return m->key && m->val;
-}
-
-static void map_put(gid_map *m, uint64_t gid, int32_t idx) {
-  size_t i = (size_t)u64_mix(gid) & m->mask;
-  while (m->key[i] && m->key[i] != gid) i = (i + 1) & m->mask;
-  m->key[i] = gid; /* gids are never 0: the heap index has a sentinel bit */
-  m->val[i] = idx;
-}
-
-static int32_t map_get(const gid_map *m, uint64_t gid) {
-  size_t i = (size_t)u64_mix(gid) & m->mask;
-  while (m->key[i]) {
-    if (m->key[i] == gid) return m->val[i];
-    i = (i + 1) & m->mask;
-  }
-  return -1;
-}
-
 /* Creates (by subdividing its parent, which exists) the element with gid 'g'; its index, or -1
  * when the gid cannot be an element of this scene. */
-static int32_t make_element(hr_solver *s, gid_map *m, uint64_t g) {
+static int32_t make_element(hr_solver *s, uint64_t g) {
   const uint64_t pathmask = (UINT64_C(1) << HR_GID_PATH_BITS) - 1;
   const uint64_t heap = g & pathmask, surf = g >> HR_GID_PATH_BITS;
   if (surf >= (uint64_t)s->scene->nsurfs || heap < 4) return -1;
-  const int32_t parent = map_get(m, (g & ~pathmask) | (heap >> 2));
+  const int32_t parent = hr_elem_find(s, (g & ~pathmask) | (heap >> 2));
   if (parent < 0) return -1;
   if (s->el[parent].child < 0 && hr_elem_subdivide(s, parent) != HR_OK) return -2;
   if (s->el[parent].child < 0) return -1;
-  const int32_t first = s->el[parent].child;
-  for (int k = 0; k < 4; k++) map_put(m, s->el[first + k].gid, first + k);
-  return first + (int32_t)(heap & 3);
+  return s->el[parent].child + (int32_t)(heap & 3);
 }
 
 /* Reads the elements; 0 on a damaged file (message set), -1 when out of memory. */
-static int read_elements(hr_solver *s, reader *r, gid_map *m, const char *path, hr_err *err) {
+static int read_elements(hr_solver *s, reader *r, const char *path, hr_err *err) {
   int64_t n;
   get(r, &n, sizeof n);
   if (r->bad || n < s->scene->nsurfs || n > (int64_t)(r->end - r->p)) {
     hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (element count)", path);
     return 0;
   }
-  if (!map_init(m, n)) return -1;
-  for (int32_t i = 0; i < s->scene->nsurfs; i++) map_put(m, s->el[i].gid, i);
   for (int64_t i = 0; i < n; i++) {
     uint64_t g;
     elem_rec er;
     get(r, &g, sizeof g);
     get(r, &er, sizeof er);
     if (r->bad) break;
-    int32_t e = map_get(m, g);
-    if (e < 0) e = make_element(s, m, g);
+    int32_t e = hr_elem_find(s, g);
+    if (e < 0) e = make_element(s, g);
     if (e == -2) return -1;
     if (e < 0) {
       hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (element %llx)", path,
@@ -421,7 +385,7 @@ static int read_elements(hr_solver *s, reader *r, gid_map *m, const char *path, 
 }
 
 /* Reads the links into s->links and s->pool; 0 on a damaged file, -1 when out of memory. */
-static int read_links(hr_solver *s, reader *r, const gid_map *m, const char *path, hr_err *err) {
+static int read_links(hr_solver *s, reader *r, const char *path, hr_err *err) {
   int64_t n;
   get(r, &n, sizeof n);
   if (r->bad || n < 0 || n > (int64_t)(r->end - r->p) / (int64_t)sizeof(link_rec)) {
@@ -435,7 +399,7 @@ static int read_links(hr_solver *s, reader *r, const gid_map *m, const char *pat
   for (int64_t i = 0; i < n; i++) {
     link_rec lr;
     get(r, &lr, sizeof lr);
-    const int32_t ri = map_get(m, lr.r), si = map_get(m, lr.s);
+    const int32_t ri = hr_elem_find(s, lr.r), si = hr_elem_find(s, lr.s);
     if (r->bad || ri < 0 || si < 0 || lr.ncand < -1 ||
         (lr.ncand > 0 && (size_t)lr.ncand > (size_t)(r->end - r->p) / sizeof(int32_t))) {
       hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (link %lld)", path, (long long)i);
@@ -505,7 +469,6 @@ static hr_status resume(hr_solver *s, const char *path, hr_err *err) {
   get(&r, &hs, sizeof hs);
   get(&r, &ho, sizeof ho);
   hr_status st = HR_OK;
-  gid_map m = {NULL, NULL, 0};
   /* The checksum (of every piece the writer put, in its pieces) is checked at the end. */
   uint64_t sum = 0;
   if (len >= 8) memcpy(&sum, buf + len - 8, 8);
@@ -527,8 +490,8 @@ static hr_status resume(hr_solver *s, const char *path, hr_err *err) {
   if (st == HR_OK) {
     r.end = buf + len - 8; /* the checksum is not part of the content */
     get(&r, &pr, sizeof pr);
-    int ok = r.bad ? 0 : read_elements(s, &r, &m, path, err);
-    if (ok > 0) ok = read_links(s, &r, &m, path, err);
+    int ok = r.bad ? 0 : read_elements(s, &r, path, err);
+    if (ok > 0) ok = read_links(s, &r, path, err);
     if (ok < 0)
       st = hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
     else if (ok == 0)
@@ -536,8 +499,6 @@ static hr_status resume(hr_solver *s, const char *path, hr_err *err) {
     else if (r.p != r.end || r.h != sum)
       st = hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (checksum)", path);
   }
-  free(m.key);
-  free(m.val);
   free(buf);
   if (st != HR_OK) return st;
   s->iterations = pr.iterations, s->converged = pr.converged, s->done = pr.done;

@@ -337,14 +337,12 @@ static hr_status push_pull_dist(hr_solver *s, double *maxc, hr_err *err) {
   p.change = malloc((size_t)n0 * sizeof *p.change);
   p.wait = calloc((size_t)n0, sizeof *p.wait);
   p.stack = malloc((size_t)n0 * sizeof *p.stack);
-  int ok = p.g && p.range && p.change && p.wait && p.stack && index_subs(&p) &&
-           hr_dist_mq_open(s->dist, TAG_PUSHPULL, &p.q) == HR_OK;
-  if (hr_test_fail(s, HR_PHASE_PUSHPULL)) ok = 0;
-  hr_status st = hr_dist_agree(s, ok ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory%s",
-                                                           hr_test_fail(s, HR_PHASE_PUSHPULL)
-                                                               ? " (injected by HRAD_TEST_FAIL)"
-                                                               : ""),
-                               err);
+  const int injected = hr_test_fail(s, HR_PHASE_PUSHPULL);
+  const int ok = !injected && p.g && p.range && p.change && p.wait && p.stack &&
+                 index_subs(&p) && hr_dist_mq_open(s->dist, TAG_PUSHPULL, &p.q) == HR_OK;
+  const char *why = injected ? " (injected by HRAD_TEST_FAIL)" : "";
+  hr_status st = hr_dist_agree(
+      s, ok ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory%s", why), err);
   if (st == HR_OK) {
     /* what this rank will complete and receive */
     int64_t own = 0, expect = 0;

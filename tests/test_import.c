@@ -12,6 +12,7 @@
  *    vertices of the floor's triangles agree, the floor-wall crease does not. */
 #include "hrad.h"
 #include "output.h"
+#include "testutil.h"
 #include "texture.h"
 
 #include <math.h>
@@ -20,17 +21,6 @@
 #include <string.h>
 #include <unistd.h>
 
-static int failures = 0;
-
-#define CHECK(cond, ...)                                              \
-  do {                                                                \
-    if (!(cond)) {                                                    \
-      failures++;                                                     \
-      fprintf(stderr, "FAIL %s:%d: %s: ", __FILE__, __LINE__, #cond); \
-      fprintf(stderr, __VA_ARGS__);                                   \
-      fputc('\n', stderr);                                            \
-    }                                                                 \
-  } while (0)
 
 static const char *data(const char *name) {
   static char path[1024];
@@ -244,7 +234,8 @@ static double edge_jump(const hr_mesh *m, const int *vp, int pa, int pb, const f
   enum { MAXV = 4096 };
   static double t[2][MAXV], val[2][MAXV];
   int n[2] = {0, 0};
-  double d[3] = {Q[0] - P[0], Q[1] - P[1], Q[2] - P[2]}, dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+  double d[3] = {Q[0] - P[0], Q[1] - P[1], Q[2] - P[2]};
+  double dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
   for (int64_t v = 0; v < m->nverts; v++) {
     int side = vp[v] == pa ? 0 : vp[v] == pb ? 1 : -1;
     if (side < 0 || n[side] == MAXV) continue;
@@ -365,10 +356,5 @@ int main(void) {
   test_textured();
   test_jpeg();
   test_smooth();
-  if (failures) {
-    fprintf(stderr, "test_import: %d failure(s)\n", failures);
-    return 1;
-  }
-  printf("test_import: all passed\n");
-  return 0;
+  return t_done("test_import");
 }

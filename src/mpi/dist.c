@@ -263,46 +263,6 @@ hr_status hr_dist_alltoall_st(const hr_dist *d, const void *send, const int64_t 
   return HR_OK;
 }
 
-static int cmp_i32(const void *a, const void *b) {
-  const int32_t x = *(const int32_t *)a, y = *(const int32_t *)b;
-  return (x > y) - (x < y);
-}
-
-hr_status hr_dist_union_i32(const hr_dist *d, const int32_t *mine, int64_t n, int32_t **all,
-                            int64_t *nall) {
-  *all = NULL;
-  *nall = 0;
-  const int P = d->size;
-  int *cnt = malloc((size_t)P * sizeof *cnt), *dsp = malloc((size_t)P * sizeof *dsp);
-  int64_t tot = n, bad = !cnt || !dsp || n > INT_MAX;
-  hr_dist_sum_i64(d, &tot, 1);
-  int32_t *v = NULL;
-  if (!bad && tot <= INT_MAX && !(v = malloc((size_t)(tot > 0 ? tot : 1) * sizeof *v))) bad = 1;
-  if (tot > INT_MAX) bad = 2;
-  hr_dist_max_i64(d, &bad, 1);
-  if (bad) {
-    free(cnt);
-    free(dsp);
-    free(v);
-    return bad == 2 ? HR_ERR_TOO_BIG : HR_ERR_NOMEM;
-  }
-  int ni = (int)n;
-  const double t0 = MPI_Wtime();
-  MPI_Allgather(&ni, 1, MPI_INT, cnt, 1, MPI_INT, d->comm);
-  for (int p = 0, o = 0; p < P; p++) dsp[p] = o, o += cnt[p];
-  MPI_Allgatherv(mine, ni, MPI_INT32_T, v, cnt, dsp, MPI_INT32_T, d->comm);
-  count((hr_dist *)d, n * (int64_t)sizeof *mine, t0);
-  free(cnt);
-  free(dsp);
-  int64_t k = 0;
-  qsort(v, (size_t)tot, sizeof *v, cmp_i32);
-  for (int64_t i = 0; i < tot; i++)
-    if (k == 0 || v[k - 1] != v[i]) v[k++] = v[i];
-  *all = v;
-  *nall = k;
-  return HR_OK;
-}
-
 /* ---------------------------------------------------------------- message queues */
 
 /* A batch goes out when its buffer reaches this size. */

@@ -28,11 +28,6 @@ hr_status hr_dist_alltoall(const hr_dist *d, const void *send, const int64_t *sb
  * own error); a failed allocation here gives HR_ERR_NOMEM on every rank. */
 hr_status hr_dist_alltoall_st(const hr_dist *d, const void *send, const int64_t *sbytes,
                               int failed, void **recv, int64_t *rbytes_total);
-/* The sorted union without repeats of every rank's 'mine' (n values): '*all' (malloc'd, caller
- * frees) with '*nall' values. d must not be NULL. */
-hr_status hr_dist_union_i32(const hr_dist *d, const int32_t *mine, int64_t n, int32_t **all,
-                            int64_t *nall);
-
 /* What this rank spent in the collectives above so far: calls, bytes sent, seconds. */
 void hr_dist_counters(const hr_dist *d, int64_t *calls, int64_t *bytes, double *secs);
 /* Rank 0 gets every rank's 'n' bytes of 'mine' in rank order in 'all' (n P bytes; others may
