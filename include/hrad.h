@@ -228,7 +228,9 @@ int hr_scene_format_known(const char *path);
 hr_status hr_scene_parse_obj_mtl(const char *obj, size_t olen, const char *mtl, size_t mlen,
                                  const char *path, const hr_log *log, hr_scene **out,
                                  hr_err *err);
-/* Builds a built-in scene: "room", "floor", "museum", "cornell". HR_ERR_INVALID if unknown. */
+/* Builds a built-in scene: "room", "floor", "museum", "cornell", "office", or "hall:N" (N x N
+ * furnished cells of small triangles, N in 1..64; "hall" is "hall:4"). HR_ERR_INVALID if
+ * unknown or N is bad. */
 hr_status hr_scene_builtin(const char *name, hr_scene **out, hr_err *err);
 /* NULL-terminated list of built-in scene names. */
 const char *const *hr_scene_builtin_names(void);

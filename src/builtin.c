@@ -49,10 +49,24 @@
  *            floor, a wall, the ceiling or another block are left out; thin faces (desk and shelf
  *            edges) are cut into pieces at most 9 times longer than wide. Camera in the corner at
  *            x = 6, z = 5, looking over the free-standing desk toward the accent wall.
+ *   hall:N   For scaling runs (N = 1..64; "hall" is hall:4): N x N cells of 4 x 4 m under a 3 m
+ *            ceiling, 991 N^2 + 70 N triangles (1061 for N = 1, 1,017,024 for N = 32), every
+ *            polygon a triangle, cut as real meshes are. Each cell: a floor of 6 x 6 pieces
+ *            graded toward a corner (slivers; T-junctions where cells meet), a 4 x 4 ceiling, a
+ *            1 x 0.5 m lamp facing down 0.1 m below the ceiling (E = 150, 144, 132 W/m^2) in a
+ *            housing that runs into the ceiling, a table (legs through its top and into the
+ *            floor) turned by up to 3 degrees, three chairs (one pushed in so far that its back
+ *            passes through the table top), a bookshelf with 21 books whose faces touch, and on
+ *            the inner cell lines partitions 2.2 m tall, through the floor, with openings. Thin
+ *            faces are fans of slivers (aspect ratio up to 160). Deterministic variation per cell
+ *            (book sizes, chair and table turns). The scene is named "hall-N". Camera above the
+ *            first cell's corner, looking across the hall.
  */
 #include "hrad.h"
 #include "vec.h"
 
+#include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -104,17 +118,22 @@ static void set_comp(hr_vec3 *p, int a, double v) {
 /* Axis-aligned rectangle with normal 'dir', in the plane through 'lo' perpendicular to the
  * normal's axis, spanning lo..hi along the two other axes. With the in-plane axes u = a+1 and
  * v = a+2 (mod 3), u x v is +a, so (u0,v0) (u1,v0) (u1,v1) (u0,v1) faces +a. */
-static void rect(bld *b, int dir, hr_vec3 lo, hr_vec3 hi, int m) {
+static void rect_corners(int dir, hr_vec3 lo, hr_vec3 hi, hr_vec3 q[4]) {
   int a = abs(dir) - 1, u = (a + 1) % 3, v = (a + 2) % 3;
   const double us[4] = {comp(lo, u), comp(hi, u), comp(hi, u), comp(lo, u)};
   const double vs[4] = {comp(lo, v), comp(lo, v), comp(hi, v), comp(hi, v)};
-  hr_vec3 q[4];
   for (int k = 0; k < 4; k++) {
     int idx = dir > 0 ? k : (4 - k) % 4; /* reversed order faces -a */
     q[k] = lo;
     set_comp(&q[k], u, us[idx]);
     set_comp(&q[k], v, vs[idx]);
   }
+}
+
+/* That rectangle as one quad. */
+static void rect(bld *b, int dir, hr_vec3 lo, hr_vec3 hi, int m) {
+  hr_vec3 q[4];
+  rect_corners(dir, lo, hi, q);
   quad(b, q[0], q[1], q[2], q[3], m);
 }
 
@@ -828,28 +847,299 @@ static void build_office(bld *b) {
   set_camera(b->s, v3(5.85, 1.95, 4.85), v3(2.6, 0.8, 1.2), 68);
 }
 
+/* ---------------------------------------------------------------- hall */
+
+#define HA_C 4.0   /* cell size along x and z */
+#define HA_H 3.0   /* ceiling height */
+#define HA_NMAX 64 /* largest N of "hall:N" (4 million triangles) */
+#define HA_NDEF 4  /* N of "hall" */
+
+typedef struct ha_mats {
+  int floor, ceil, wall, partition, lamp, housing, table, metal, chair, shelf, book[4];
+} ha_mats;
+
+/* A placement: local (x, y, z) goes to o + the rotation by 'yaw' about +y of (x, y, z). */
+typedef struct ha_frame {
+  hr_vec3 o;
+  double c, s;
+} ha_frame;
+
+static ha_frame ha_at(double x, double z, double yaw) {
+  return (ha_frame){v3(x, 0, z), cos(yaw), sin(yaw)};
+}
+
+static hr_vec3 ha_world(const ha_frame *f, hr_vec3 p) {
+  return v3(f->o.x + f->c * p.x + f->s * p.z, f->o.y + p.y, f->o.z - f->s * p.x + f->c * p.z);
+}
+
+/* A number in [0, 1) fixed by (i, j, k): the per-cell variation (splitmix64's finaliser). */
+static double ha_rand(int i, int j, int k) {
+  uint64_t x = (uint64_t)i * 0x9E3779B97F4A7C15u + (uint64_t)j * 0xC2B2AE3D27D4EB4Fu +
+               (uint64_t)k * 0x165667B19E3779F9u + 1u;
+  x ^= x >> 30;
+  x *= 0xBF58476D1CE4E5B9u;
+  x ^= x >> 27;
+  x *= 0x94D049BB133111EBu;
+  x ^= x >> 31;
+  return (double)(x >> 11) * 0x1.0p-53;
+}
+
+static void tri(bld *b, hr_vec3 p, hr_vec3 q, hr_vec3 r, int m) {
+  const hr_vec3 v[3] = {p, q, r};
+  poly(b, v, 3, m);
+}
+
+static hr_vec3 ha_point(hr_vec3 p0, hr_vec3 e1, hr_vec3 e2, double s, double t) {
+  return v3_add(p0, v3_add(v3_scale(e1, s), v3_scale(e2, t)));
+}
+
+/* The parallelogram p0, p0 + e1, p0 + e1 + e2, p0 + e2 (counter-clockwise seen from its front)
+ * as n1 x n2 cells of two triangles, the diagonals alternating like a checkerboard. The cuts
+ * along e1 lie at (k / n1)^g: g > 1 crowds thin cells, and sliver triangles, toward p0. A point
+ * comes from the same expression in every cell that has it, so neighbours share edges exactly. */
+static void ha_grid(bld *b, hr_vec3 p0, hr_vec3 e1, hr_vec3 e2, int n1, int n2, double g,
+                    int m) {
+  for (int i = 0; i < n1; i++) {
+    double s0 = pow((double)i / n1, g), s1 = pow((double)(i + 1) / n1, g);
+    for (int j = 0; j < n2; j++) {
+      double t0 = (double)j / n2, t1 = (double)(j + 1) / n2;
+      hr_vec3 a = ha_point(p0, e1, e2, s0, t0), c = ha_point(p0, e1, e2, s1, t0);
+      hr_vec3 d = ha_point(p0, e1, e2, s1, t1), e = ha_point(p0, e1, e2, s0, t1);
+      if ((i + j) & 1) {
+        tri(b, a, c, e, m);
+        tri(b, c, d, e, m);
+      } else {
+        tri(b, a, c, d, m);
+        tri(b, a, d, e, m);
+      }
+    }
+  }
+}
+
+/* The same parallelogram as k >= 2 triangles fanned from p0 to points spread evenly along the
+ * two far edges (k / 2 cuts on the edge from p0 + e1, the rest on the edge to p0 + e2): on a
+ * thin face, a fan of long slivers, as exporters write them. */
+static void ha_fan(bld *b, hr_vec3 p0, hr_vec3 e1, hr_vec3 e2, int k, int m) {
+  int k1 = k / 2, k2 = k - k1;
+  hr_vec3 prev = v3_add(p0, e1);
+  for (int q = 1; q <= k; q++) {
+    hr_vec3 p = q <= k1 ? ha_point(p0, e1, e2, 1, (double)q / k1)
+                        : ha_point(p0, e1, e2, 1 - (double)(q - k1) / k2, 1);
+    tri(b, p0, prev, p, m);
+    prev = p;
+  }
+}
+
+/* The faces 'mask' (box_out()'s bits, outward) of the box lo..hi placed by 'f', each cut into
+ * n[axis] pieces along each of its two axes (two triangles a piece), or, for the faces in
+ * 'fans', fanned into as many triangles as the face has pieces along its two sides together. */
+static void ha_box(bld *b, const ha_frame *f, hr_vec3 lo, hr_vec3 hi, const int n[3], int mask,
+                   int fans, int m) {
+  static const int dirs[6] = {YP, YN, XN, XP, ZN, ZP};
+  for (int k = 0; k < 6; k++) {
+    int dir = dirs[k], bit = face_bit(dir);
+    if (!(mask & bit)) continue;
+    int a = abs(dir) - 1, u = (a + 1) % 3, v = (a + 2) % 3;
+    hr_vec3 plo = lo, phi = hi, q[4];
+    if (dir > 0)
+      set_comp(&plo, a, comp(hi, a));
+    else
+      set_comp(&phi, a, comp(lo, a));
+    rect_corners(dir, plo, phi, q);
+    for (int i = 0; i < 4; i++) q[i] = ha_world(f, q[i]);
+    int n1 = dir > 0 ? n[u] : n[v], n2 = dir > 0 ? n[v] : n[u];
+    hr_vec3 e1 = v3_sub(q[1], q[0]), e2 = v3_sub(q[3], q[0]);
+    if (fans & bit)
+      ha_fan(b, q[0], e1, e2, n1 + n2, m);
+    else
+      ha_grid(b, q[0], e1, e2, n1, n2, 1.0, m);
+  }
+}
+
+/* Chair seen from its frame: the sitter faces -z. A 0.45 m square seat (top at 0.48 m; 28
+ * triangles), a back standing on the seat's +z edge up to 0.93 m (25), and four 0.04 m legs from
+ * 1 cm below the floor to the seat (8 each): 85 triangles. */
+static void ha_chair(bld *b, const ha_frame *f, const ha_mats *m) {
+  const double h = 0.225, lw = 0.04, li = 0.02;
+  static const int ns[3] = {2, 1, 2}, nb[3] = {2, 2, 1}, nl[3] = {1, 1, 1};
+  ha_box(b, f, v3(-h, 0.43, -h), v3(h, 0.48, h), ns, F_ALL, F_SIDES, m->chair);
+  ha_box(b, f, v3(-h, 0.48, h - 0.04), v3(h, 0.93, h), nb, F_NOBOTTOM, F_YP | F_XN | F_XP,
+         m->chair);
+  for (int k = 0; k < 4; k++) {
+    double x = k & 1 ? h - li - lw : -h + li, z = k & 2 ? h - li - lw : -h + li;
+    ha_box(b, f, v3(x, -0.01, z), v3(x + lw, 0.43, z + lw), nl, F_SIDES, 0, m->metal);
+  }
+}
+
+/* Cell (i, j) of "hall": x in [4i, 4i + 4], z in [4j, 4j + 4]. Polygon order and triangles:
+ * floor (72), ceiling (32), lamp (16 emitting, 16 housing), table (112), three chairs (255),
+ * bookshelf with 21 books (366), then the partition on the cell's x line when i > 0 and on its z
+ * line when j > 0 (61 each): 869 + 61 per partition. */
+static void ha_cell(bld *b, int i, int j, const ha_mats *m) {
+  const double C = HA_C, H = HA_H, x0 = i * C, z0 = j * C;
+  const ha_frame cell = ha_at(x0, z0, 0);
+  /* Floor: 6 x 6 pieces crowded toward one corner (alternating between cells: T-junctions and
+   * slivers where cells meet); ceiling 4 x 4. */
+  if ((i + j) & 1)
+    ha_grid(b, v3(x0, 0, z0), v3(0, 0, C), v3(C, 0, 0), 6, 6, 1.7, m->floor);
+  else
+    ha_grid(b, v3(x0 + C, 0, z0 + C), v3(0, 0, -C), v3(-C, 0, 0), 6, 6, 1.7, m->floor);
+  ha_grid(b, v3(x0, H, z0), v3(C, 0, 0), v3(0, 0, C), 4, 4, 1.0, m->ceil);
+  /* Lamp over the table: a 1 x 0.5 m emitter facing down 0.1 m below the ceiling, its
+   * housing's sides running 1 cm into the ceiling. */
+  const double cx = 1.9, cz = 2.3;
+  static const int nlamp[3] = {4, 1, 2};
+  ha_box(b, &cell, v3(cx - 0.5, H - 0.1, cz - 0.25), v3(cx + 0.5, H + 0.01, cz + 0.25), nlamp,
+         F_YN, 0, m->lamp);
+  ha_box(b, &cell, v3(cx - 0.5, H - 0.1, cz - 0.25), v3(cx + 0.5, H + 0.01, cz + 0.25), nlamp,
+         F_SIDES, F_SIDES, m->housing);
+  /* Table: a 1.8 x 0.9 m top 5 cm thick at 0.77 m, turned by up to 3 degrees, on four legs that
+   * run through it and 1 cm into the floor. */
+  const ha_frame tf = ha_at(x0 + cx, z0 + cz, 0.1 * (ha_rand(i, j, 0) - 0.5));
+  static const int ntop[3] = {4, 1, 2}, nleg[3] = {1, 2, 1};
+  ha_box(b, &tf, v3(-0.9, 0.72, -0.45), v3(0.9, 0.77, 0.45), ntop, F_ALL, F_SIDES, m->table);
+  for (int k = 0; k < 4; k++) {
+    double x = k & 1 ? 0.82 : -0.88, z = k & 2 ? 0.37 : -0.43;
+    ha_box(b, &tf, v3(x, -0.01, z), v3(x + 0.06, 0.77, z + 0.06), nleg, F_SIDES, 0, m->metal);
+  }
+  /* Two chairs facing the table from -z, turned a little; the third pushed in from +z so far
+   * that its back runs through the table top's edge. */
+  ha_frame c1 = ha_at(x0 + 1.45, z0 + 1.45, M_PI + 0.2 * (ha_rand(i, j, 1) - 0.5));
+  ha_frame c2 = ha_at(x0 + 2.35, z0 + 1.5, M_PI + 0.6 * (ha_rand(i, j, 2) - 0.5));
+  ha_frame c3 = ha_at(x0 + 1.9, z0 + 2.545, 0);
+  ha_chair(b, &c1, m);
+  ha_chair(b, &c2, m);
+  ha_chair(b, &c3, m);
+  /* Bookshelf, open toward -x: x in [3.45, 3.77], z in [0.5, 1.7], 1.6 m tall. Two sides, a
+   * back and four boards that run into them; on each of the three lower boards seven books
+   * side by side (their faces touch), each 2.5-5 cm thick, 18-30 cm tall, 16-24 cm deep. */
+  static const int nside[3] = {1, 3, 1}, nback[3] = {1, 3, 3}, nboard[3] = {1, 1, 3};
+  static const int nbook[3] = {1, 1, 1};
+  const double sx0 = 3.45, sx1 = 3.77, sz0 = 0.5, sz1 = 1.7, sh = 1.6, t = 0.02;
+  ha_box(b, &cell, v3(sx0, 0, sz0), v3(sx1, sh, sz0 + t), nside, F_NOBOTTOM,
+         F_YP | F_XN | F_XP, m->shelf);
+  ha_box(b, &cell, v3(sx0, 0, sz1 - t), v3(sx1, sh, sz1), nside, F_NOBOTTOM, F_YP | F_XN | F_XP,
+         m->shelf);
+  ha_box(b, &cell, v3(sx1 - t, 0, sz0 + 0.01), v3(sx1, sh, sz1 - 0.01), nback, F_NOBOTTOM,
+         F_YP | F_ZN | F_ZP, m->shelf);
+  static const double by[4] = {0.06, 0.56, 1.06, 1.58};
+  for (int k = 0; k < 4; k++)
+    ha_box(b, &cell, v3(sx0, by[k], sz0 + 0.01), v3(sx1 - 0.01, by[k] + t, sz1 - 0.01), nboard,
+           F_YP | F_YN | F_XN, F_XN, m->shelf);
+  for (int k = 0; k < 3; k++) {
+    double z = sz0 + t, y = by[k] + t;
+    for (int n = 0; n < 7; n++) {
+      int r = 3 + 21 * k + 3 * n;
+      double th = 0.025 + 0.025 * ha_rand(i, j, r), hb = 0.18 + 0.12 * ha_rand(i, j, r + 1);
+      double d = 0.16 + 0.08 * ha_rand(i, j, r + 2);
+      ha_box(b, &cell, v3(sx0 + t, y, z), v3(sx0 + t + d, y + hb, z + th), nbook, F_NOBOTTOM, 0,
+             m->book[(i + 2 * j + k + n) % 4]);
+      z += th;
+    }
+  }
+  /* Partitions 0.1 m thick and 2.2 m tall, from 2 cm below the floor: on the x line from the
+   * cell's corner 2.45 m along z, and on the z line over x in [1.6, 4.05]; each runs 5 cm past
+   * the corner it starts from, into the outer wall or the next partition. */
+  static const int npx[3] = {1, 3, 4}, npz[3] = {4, 3, 1};
+  if (i > 0)
+    ha_box(b, &cell, v3(-0.05, -0.02, -0.05), v3(0.05, 2.2, 2.4), npx, F_NOBOTTOM,
+           F_YP | F_ZN | F_ZP, m->partition);
+  if (j > 0)
+    ha_box(b, &cell, v3(1.6, -0.02, -0.05), v3(C + 0.05, 2.2, 0.05), npz, F_NOBOTTOM,
+           F_YP | F_XN | F_XP, m->partition);
+}
+
+/* "hall:N": N x N cells of 4 x 4 m under a 3 m ceiling, then the outer walls, one 6 x 4 grid
+ * (48 triangles) per cell side: 991 N^2 + 70 N triangles (1061 for N = 1, 1,017,024 for 32). */
+static void build_hall(bld *b, int n) {
+  ha_mats m;
+  m.floor = mat(b, "floor", 0.50, 0.42, 0.33, 0, 0, 0);
+  m.ceil = mat(b, "ceiling", 0.80, 0.80, 0.78, 0, 0, 0);
+  m.wall = mat(b, "wall", 0.72, 0.70, 0.66, 0, 0, 0);
+  m.partition = mat(b, "partition", 0.35, 0.45, 0.60, 0, 0, 0);
+  m.lamp = mat(b, "lamp", 0.80, 0.80, 0.80, 150, 144, 132);
+  m.housing = mat(b, "lamp_housing", 0.70, 0.70, 0.70, 0, 0, 0);
+  m.table = mat(b, "table", 0.55, 0.40, 0.26, 0, 0, 0);
+  m.metal = mat(b, "metal", 0.40, 0.40, 0.42, 0, 0, 0);
+  m.chair = mat(b, "chair", 0.62, 0.24, 0.12, 0, 0, 0);
+  m.shelf = mat(b, "bookshelf", 0.45, 0.32, 0.20, 0, 0, 0);
+  m.book[0] = mat(b, "books_red", 0.55, 0.14, 0.12, 0, 0, 0);
+  m.book[1] = mat(b, "books_green", 0.18, 0.42, 0.22, 0, 0, 0);
+  m.book[2] = mat(b, "books_blue", 0.16, 0.24, 0.55, 0, 0, 0);
+  m.book[3] = mat(b, "books_ochre", 0.72, 0.55, 0.20, 0, 0, 0);
+  for (int j = 0; j < n; j++)
+    for (int i = 0; i < n; i++) ha_cell(b, i, j, &m);
+  const double C = HA_C, H = HA_H, L = n * C;
+  for (int k = 0; k < n; k++) {
+    double a = k * C;
+    ha_grid(b, v3(a, 0, 0), v3(C, 0, 0), v3(0, H, 0), 6, 4, 1.0, m.wall);      /* faces +z */
+    ha_grid(b, v3(a, 0, L), v3(0, H, 0), v3(C, 0, 0), 4, 6, 1.0, m.wall);      /* faces -z */
+    ha_grid(b, v3(0, 0, a), v3(0, H, 0), v3(0, 0, C), 4, 6, 1.0, m.wall);      /* faces +x */
+    ha_grid(b, v3(L, 0, a), v3(0, 0, C), v3(0, H, 0), 6, 4, 1.0, m.wall);      /* faces -x */
+  }
+  /* From above the first cell's corner, over its table, diagonally across the hall. */
+  double k = 0.55 * C * (n < 4 ? n : 4);
+  set_camera(b->s, v3(0.35, 2.6, 0.35), v3(k, 0.6, k), 60);
+}
+
 /* ---------------------------------------------------------------- public */
 
-static const char *const builtin_names[] = {"room", "floor", "museum", "cornell", "office", NULL};
+static const char *const builtin_names[] = {"room",   "floor", "museum", "cornell",
+                                            "office", "hall",  NULL};
 
 const char *const *hr_scene_builtin_names(void) { return builtin_names; }
+
+/* The N of "hall" (HA_NDEF) or "hall:N" (decimal digits, 1..HA_NMAX) in '*n': 1 for a hall,
+ * -1 for a hall with a bad N, 0 for another name. */
+static int hall_size(const char *name, int *n) {
+  if (strcmp(name, "hall") == 0) {
+    *n = HA_NDEF;
+    return 1;
+  }
+  if (strncmp(name, "hall:", 5) != 0) return 0;
+  const char *p = name + 5;
+  long v = 0;
+  if (!*p) return -1;
+  for (; *p; p++) {
+    if (*p < '0' || *p > '9') return -1;
+    v = 10 * v + (*p - '0');
+    if (v > HA_NMAX) return -1;
+  }
+  if (v < 1) return -1;
+  *n = (int)v;
+  return 1;
+}
 
 hr_status hr_scene_builtin(const char *name, hr_scene **out, hr_err *err) {
   static void (*const builders[])(bld *) = {build_room, build_floor, build_museum,
                                             build_cornell, build_office};
   if (out) *out = NULL;
-  int which = -1;
-  for (int i = 0; name && builtin_names[i]; i++)
+  int which = -1, n = 0, hall = name ? hall_size(name, &n) : 0;
+  for (int i = 0; name && i < 5; i++)
     if (strcmp(name, builtin_names[i]) == 0) which = i;
-  if (which < 0)
+  if (hall < 0)
     return hr_err_set(err, HR_ERR_INVALID,
-                      "unknown scene '%s' (built-in: room, floor, museum, cornell, office)",
+                      "scene '%s': hall:N needs N, a whole number in 1..%d (N x N cells, "
+                      "about 1000 N^2 triangles)",
+                      name, HA_NMAX);
+  if (which < 0 && !hall)
+    return hr_err_set(err, HR_ERR_INVALID,
+                      "unknown scene '%s' (built-in: room, floor, museum, cornell, office, "
+                      "hall:N)",
                       name ? name : "");
   if (!out) return hr_err_set(err, HR_ERR_INVALID, "hr_scene_builtin: 'out' is NULL");
+  char hname[32];
+  if (hall) {
+    snprintf(hname, sizeof hname, "hall-%d", n);
+    name = hname;
+  }
   bld b = {NULL, HR_OK, 0};
   if (hr_scene_create(name, &b.s) != HR_OK)
     return hr_err_set(err, HR_ERR_NOMEM, "out of memory building scene '%s'", name);
-  builders[which](&b);
+  if (hall)
+    build_hall(&b, n);
+  else
+    builders[which](&b);
   if (b.st == HR_OK && b.bad)
     b.st = hr_err_set(err, HR_ERR_INVALID, "built-in scene '%s': %d degenerate polygon(s)",
                       name, b.bad);

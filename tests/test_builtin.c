@@ -10,7 +10,8 @@
  * rays through, unknown names fail with HR_ERR_INVALID and the exact message, the name list,
  * determinism. For "office": its small downward lamps, furniture that stands on the floor,
  * touches what holds it up and leaves out only faces that lie against something, and no two
- * coplanar overlapping surfaces. */
+ * coplanar overlapping surfaces. For "hall:N": golden triangle counts, emitted power N^2 times
+ * a cell's, closed and front-facing from the air despite interpenetrating furniture, bad N. */
 #include "hrad.h"
 #include "testutil.h"
 
@@ -723,21 +724,98 @@ static void test_office(void) {
   hr_scene_destroy(&s);
 }
 
+/* "hall:N" as documented in builtin.c: N x N cells of 4 x 4 x 3 m, 991 N^2 + 70 N triangles
+ * (golden counts for N = 1 and 4, the formula for 2 and 3), each cell's 1 x 0.5 m lamp facing
+ * down at E = (150, 144, 132), so the emitted power is N^2 times one cell's; the hall is closed
+ * and every surface that the air sees faces it (from the camera, above and under a table,
+ * inside a bookshelf), despite the interpenetrating furniture; bounds show the partitions
+ * running into the floor and the outer walls; "hall" is "hall:4"; bad N fail; deterministic. */
+static void test_hall(void) {
+  const double E[3] = {150, 144, 132}, C = 4.0, H = 3.0;
+  for (int n = 1; n <= 4; n++) {
+    char name[16], sname[16];
+    snprintf(name, sizeof name, "hall:%d", n);
+    snprintf(sname, sizeof sname, "hall-%d", n);
+    hr_scene *s = load(name);
+    if (!s) continue;
+    int nemit = check_common(s, sname, 1000.0); /* slivers of aspect 160 by design */
+    int want = n == 1 ? 1061 : n == 4 ? 16136 : 991 * n * n + 70 * n;
+    CHECK(s->npolys == want && s->nsurfs == want && s->ninputs == want,
+          "%s: %d polygons, %d surfaces, %d inputs, want %d triangles", name, s->npolys,
+          s->nsurfs, s->ninputs, want);
+    CHECK(nemit == 16 * n * n, "%s: %d emitting triangles, want %d", name, nemit, 16 * n * n);
+    double P[3] = {0, 0, 0};
+    for (int i = 0; i < s->nsurfs; i++) {
+      const hr_surface *f = &s->surfs[i];
+      const double *e = s->mats[f->material].emit;
+      for (int c = 0; c < 3; c++) P[c] += f->area * e[c];
+      if (e[0] > 0) CHECK(f->normal.y < -0.999, "%s: lamp surface %d does not face down", name, i);
+    }
+    for (int c = 0; c < 3; c++)
+      CHECK_REL(P[c], 0.5 * E[c] * n * n, 1e-12, "hall emitted power (W)");
+    double L = n * C;
+    if (n == 1)
+      check_bounds(s, name, tv(0, -0.01, 0), tv(L, H + 0.01, L), 1e-9);
+    else
+      check_bounds(s, name, tv(0, -0.02, -0.05), tv(L + 0.05, H + 0.01, L), 1e-9);
+    if (n <= 2) {
+      check_closed_from(s, "hall camera", s->camera.eye, 1000);
+      for (int j = 0; j < n; j++)
+        for (int i = 0; i < n; i++) {
+          double x0 = i * C, z0 = j * C;
+          check_closed_from(s, "hall above the table", tv(x0 + 0.8, 1.5, z0 + 3.3), 500);
+          check_closed_from(s, "hall under the table", tv(x0 + 1.5, 0.35, z0 + 2.3), 500);
+          check_closed_from(s, "hall in the bookshelf", tv(x0 + 3.6, 0.45, z0 + 1.5), 500);
+        }
+    }
+    if (n == 2) { /* deterministic */
+      hr_scene *s2 = load(name);
+      int same = s2 && s2->nsurfs == s->nsurfs;
+      for (int i = 0; same && i < s->nsurfs; i++)
+        same = memcmp(s->surfs[i].v, s2->surfs[i].v, sizeof s->surfs[i].v) == 0 &&
+               s->surfs[i].material == s2->surfs[i].material;
+      CHECK(same, "hall:2: two builds differ");
+      hr_scene_destroy(&s2);
+    }
+    hr_scene_destroy(&s);
+  }
+  hr_scene *s = load("hall");
+  if (s) {
+    CHECK(strcmp(s->name, "hall-4") == 0 && s->npolys == 16136, "'hall' is '%s', %d polygons",
+          s->name, s->npolys);
+    hr_scene_destroy(&s);
+  }
+  const char *bad[] = {"hall:0", "hall:65", "hall:", "hall:x", "hall:-1", "hall:4x", "hall:+4",
+                       "hall: 4", "hall:99999999999999999999", "hall4", "Hall:4"};
+  for (size_t k = 0; k < sizeof bad / sizeof *bad; k++) {
+    hr_err err = {{0}};
+    s = (hr_scene *)&err; /* must be reset to NULL */
+    hr_status st = hr_scene_builtin(bad[k], &s, &err);
+    CHECK(st == HR_ERR_INVALID && s == NULL && err.msg[0] && !strchr(err.msg, '\n'),
+          "'%s': status %d, message '%s'", bad[k], (int)st, err.msg);
+  }
+  hr_err err = {{0}};
+  hr_scene_builtin("hall:0", &s, &err);
+  CHECK(strcmp(err.msg, "scene 'hall:0': hall:N needs N, a whole number in 1..64 (N x N cells, "
+                        "about 1000 N^2 triangles)") == 0,
+        "message '%s'", err.msg);
+}
+
 static void test_names_and_errors(void) {
   const char *const *names = hr_scene_builtin_names();
-  const char *want[] = {"room", "floor", "museum", "cornell", "office"};
+  const char *want[] = {"room", "floor", "museum", "cornell", "office", "hall"};
   int n = 0;
   while (names && names[n]) n++;
-  CHECK(n == 5, "%d built-in names, want 5", n);
-  for (int i = 0; i < 5 && i < n; i++)
+  CHECK(n == 6, "%d built-in names, want 6", n);
+  for (int i = 0; i < 6 && i < n; i++)
     CHECK(strcmp(names[i], want[i]) == 0, "name %d is '%s', want '%s'", i, names[i], want[i]);
   hr_scene *s = (hr_scene *)&n; /* must be reset to NULL */
   hr_err err = {{0}};
   hr_status st = hr_scene_builtin("nope", &s, &err);
   CHECK(st == HR_ERR_INVALID, "unknown name: status %d", (int)st);
   CHECK(s == NULL, "unknown name: *out not NULL");
-  CHECK(strcmp(err.msg,
-               "unknown scene 'nope' (built-in: room, floor, museum, cornell, office)") == 0,
+  CHECK(strcmp(err.msg, "unknown scene 'nope' (built-in: room, floor, museum, cornell, office, "
+                        "hall:N)") == 0,
         "message '%s'", err.msg);
   st = hr_scene_builtin("Room", &s, NULL); /* case matters; a NULL err is fine */
   CHECK(st == HR_ERR_INVALID && s == NULL, "'Room': status %d", (int)st);
@@ -752,5 +830,6 @@ int main(void) {
   test_cornell();
   test_museum();
   test_office();
+  test_hall();
   return t_done("test_builtin");
 }

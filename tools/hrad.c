@@ -714,18 +714,27 @@ static void check_stop(cli *c) {
 
 /* ---------------------------------------------------------------- options */
 
+/* The built-in scene names, comma-separated, in 'out'; "hall" is shown as "hall[:N]". */
+static void scene_list(char *out, size_t size) {
+  out[0] = '\0';
+  for (const char *const *n = hr_scene_builtin_names(); *n; n++)
+    snprintf(out + strlen(out), size - strlen(out), "%s%s%s", out[0] ? ", " : "", *n,
+             strcmp(*n, "hall") ? "" : "[:N]");
+}
+
 static void usage(void) {
   hr_options d;
   hr_options_default(&d);
-  char scenes[256] = "";
-  for (const char *const *n = hr_scene_builtin_names(); *n; n++)
-    snprintf(scenes + strlen(scenes), sizeof scenes - strlen(scenes), "%s%s",
-             scenes[0] ? ", " : "", *n);
+  char scenes[256];
+  scene_list(scenes, sizeof scenes);
   printf(
       "Usage: hrad [OPTIONS] [--] [SCENE]\n"
       "Hierarchical radiosity (Bohn & Garmann, WSCG'95). SCENE is a built-in name\n"
-      "(%s; default room) or a scene file, read by its extension:\n"
-      ".obj (with its .mtl), or through assimp .gltf .glb .ply .3ds .fbx .dae .stl.\n"
+      "(%s; default room)\n"
+      "or a scene file, read by its extension: .obj (with its .mtl), or through assimp\n"
+      ".gltf .glb .ply .3ds .fbx .dae .stl. hall:N, for scaling runs, is N x N furnished\n"
+      "cells of small triangles, 991 N^2 + 70 N of them (N in 1..64; hall is hall:4; its\n"
+      "files are named hall-N).\n"
       "\n"
       "Output (written as one set: DIR holds the complete previous or the complete new set):\n"
       "  -o, --out DIR        output directory (default hrad-out): surfaces.csv, stats.json,\n"
@@ -1843,9 +1852,19 @@ static int on_iter(void *ud, const hr_solver *s, const hr_iter_info *it) {
   return hr_dist_any(g_dist, atomic_load(&g_stop) != 0);
 }
 
+/* A built-in name, or one with a parameter ("hall:8"; the library checks the parameter) that
+ * cannot be a scene file: no '/', no scene file extension, no such file. */
 static int is_builtin(const char *name) {
-  for (const char *const *n = hr_scene_builtin_names(); *n; n++)
-    if (!strcmp(*n, name)) return 1;
+  for (const char *const *n = hr_scene_builtin_names(); *n; n++) {
+    size_t k = strlen(*n);
+    struct stat sb;
+    if (strncmp(*n, name, k) != 0) continue;
+    if (name[k] == '\0') return 1;
+    const char *dot = strrchr(name, '.');
+    if (name[k] == ':' && !strchr(name, '/') && !(dot && hr_scene_format_known(name)) &&
+        stat(name, &sb) != 0)
+      return 1;
+  }
   return 0;
 }
 
@@ -1924,9 +1943,8 @@ static hr_scene *load_scene(const cli *c, const char *arg, const hr_log *log) {
     const char *dot = strrchr(arg, '.');
     int file_like = strchr(arg, '/') || (dot && dot > arg && hr_scene_format_known(arg));
     if (stat(arg, &sb) != 0 && !file_like) {
-      char list[256] = "";
-      for (const char *const *n = hr_scene_builtin_names(); *n; n++)
-        snprintf(list + strlen(list), sizeof list - strlen(list), "%s%s", list[0] ? ", " : "", *n);
+      char list[256];
+      scene_list(list, sizeof list);
       fail("unknown scene '%s' (built-in: %s; or a path to a scene file)", arg, list);
     }
     st = hr_scene_load(arg, log, &scene, &err);
