@@ -256,8 +256,12 @@ typedef struct hr_options {
   uint64_t seed;      /* jitter seed */
   int threads;        /* 0 = all cores */
   int max_iters;      /* safety limit on total iterations */
-  double max_links;   /* refuse initial linking above this many surface pairs (0 = no limit) */
+  double max_links;   /* more surface pairs than this: clustered under HR_CLUSTER_AUTO, refused
+                         under HR_CLUSTER_OFF (0 = no limit) */
+  int cluster;        /* HR_CLUSTER_AUTO, _ON or _OFF: hierarchical clustering (issue 12) */
 } hr_options;
+
+enum { HR_CLUSTER_AUTO = 0, HR_CLUSTER_ON = 1, HR_CLUSTER_OFF = 2 };
 
 /* Fills 'o' with the defaults. */
 void hr_options_default(hr_options *o);
@@ -285,7 +289,7 @@ typedef struct hr_stats {
   int nsurfaces, npolys;
   int64_t elements;     /* leaves */
   int64_t elements_all; /* all nodes of all quadtrees */
-  int64_t links;
+  int64_t links;        /* element links and cluster links */
   int64_t initial_links;
   int iterations;
   int64_t rays;
@@ -293,6 +297,8 @@ typedef struct hr_stats {
   int threads;
   double peak_rss_mb;
   hr_timing time_s;
+  int64_t clusters;      /* cluster nodes (0 without clustering) */
+  int64_t cluster_links; /* links with a cluster at one end or both (counted in 'links') */
 } hr_stats;
 
 hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solver **out,
@@ -321,6 +327,9 @@ hr_status hr_solver_set_progress(hr_solver *s, hr_progress_fn fn, void *ud);
  * own use; can't fail. */
 void hr_solver_progress_report(const hr_solver *s, hr_phase phase, double fraction);
 void hr_solver_stats(const hr_solver *s, hr_stats *st);
+/* 1 if the solver clusters (hr_options.cluster; decided at creation). Clustering does not yet
+ * run over several processes, nor save checkpoints. */
+int hr_solver_clustered(const hr_solver *s);
 
 /* Writes the solver's state at an iteration boundary (from the iteration callback, or after
  * hr_solver_run) to 'path', atomically (PATH.tmp, then renamed). The file names elements and

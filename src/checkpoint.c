@@ -185,6 +185,8 @@ static int pack_elements(const hr_solver *s, char **out, int64_t *bytes) {
 }
 
 hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err) {
+  if (hr_solver_clustered(s))
+    return hr_err_set(err, HR_ERR_INVALID, "%s: checkpoints do not hold cluster links yet", path);
   if (!s->started)
     return hr_err_set(err, HR_ERR_INVALID, "%s: nothing to save before the first iteration", path);
   /* Elements and links: this rank's own, and in a distributed run everybody's on rank 0, which
@@ -440,6 +442,8 @@ static int read_links(hr_solver *s, reader *r, const char *path, hr_err *err) {
 static hr_status resume(hr_solver *s, const char *path, hr_err *err);
 
 hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err) {
+  if (hr_solver_clustered(s))
+    return hr_err_set(err, HR_ERR_INVALID, "%s: checkpoints do not hold cluster links yet", path);
   hr_status st = resume(s, path, err);
   if (!s->dist) return st;
   /* every rank read the same file: only a local failure (memory) can differ */

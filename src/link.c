@@ -11,6 +11,7 @@
  * shrink it to their own shaft; links whose elements face away get F = 0. The children become the
  * next round's active links, until no link splits. */
 #include "mpi/dist.h"
+#include "cluster.h"
 #include "solver_impl.h"
 #include "vec.h"
 
@@ -296,6 +297,24 @@ static void init_row(const hr_solver *s, int i, row *rw) {
   init_flush(s, i, &gi, &pd, &blk, rw);
 }
 
+/* The element link i <- j as initial linking makes it (clustering, cluster.c): 1 with *out
+ * filled when the pair faces each other and some decision sample sees through, else 0. */
+int hr_link_pair(const hr_solver *s, int32_t i, int32_t j, hr_link *out, int64_t *rays) {
+  const hr_ff_elem gi = hr_elem_geom(s, &s->el[i]), gj = hr_elem_geom(s, &s->el[j]);
+  if (!elem_in_front(&gi, &gj) || !elem_in_front(&gj, &gi)) return 0;
+  const hr_vf_elem ei = vf_elem(s, i, &gi), ej = vf_elem(s, j, &gj);
+  const double h = hr_vf_pair(&s->vf, ei, ej, NULL, -1, pair_rays(s), STREAM_DECIDE, NULL, rays);
+  if (h == 0) return 0;
+  const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h, NULL, rays);
+  double sp;
+  const double f = hr_ff_pair(&gi, &gj, 0, &sp);
+  *out = (hr_link){.r = i, .s = j, .F = (float)(f * he), .Fu = (float)f,
+                   .dF = (float)link_df(&gi, &gj, f, sp, h), .dS = (float)link_ds(&gi, &gj, f, h),
+                   .cand_off = 0, .ncand = NO_LIST};
+  source_shares(&gi, &gj, h == 1, out->w);
+  return 1;
+}
+
 /* Distributed initial linking: every link goes to the rank that owns its receiver's surface
  * (receivers are roots here: element idx == surface). Links keep their order within each
  * sender; the order does not matter (hr_link_sort orders each receiver's links by source gid). */
@@ -331,11 +350,18 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
   const hr_scene *sc = s->scene;
   int n = sc->nsurfs;
   double pairs = 0.5 * (double)n * (double)(n - 1);
+  if (hr_cluster_wanted(&s->opt, n)) {
+    if (s->dist)
+      return hr_err_set(err, HR_ERR_INVALID,
+                        "clustering (--cluster) does not run over several processes yet");
+    hr_status st = hr_cluster_init(s, err);
+    s->initial_links = s->nlinks + hr_cluster_links(s);
+    return st;
+  }
   if (s->opt.max_links > 0 && pairs > s->opt.max_links)
     return hr_err_set(err, HR_ERR_TOO_BIG,
                       "%d surfaces make %.3g surface pairs for initial linking, above the limit "
-                      "of %.3g (--max-pairs); hierarchical clustering is needed for scenes this "
-                      "large",
+                      "of %.3g (--max-pairs) with --cluster off",
                       n, pairs, s->opt.max_links);
   row *rows = calloc((size_t)n, sizeof *rows);
   if (!rows) return hr_err_set(err, HR_ERR_NOMEM, "out of memory in initial linking");
@@ -392,11 +418,6 @@ static int elem_poly(const hr_solver *s, const hr_elem *e, hr_vec3 *p) {
   return n;
 }
 
-/* 1 if element 'e' may be split (above A_e and not at the deepest level). */
-static int splittable(const hr_solver *s, const hr_elem *e) {
-  return e->area > s->area_min && (e->child >= 0 || e->depth < HR_GID_DEPTH);
-}
-
 /* Keep the link, or split its receiver or its source: the side whose error is larger (the
  * receiver's for a tie), or the other side when that one cannot be split. */
 static uint8_t decide(const hr_solver *s, const hr_link *l, double bf_e) {
@@ -404,7 +425,7 @@ static uint8_t decide(const hr_solver *s, const hr_link *l, double bf_e) {
   double er, es;
   link_err(s, l, &er, &es);
   if (er <= bf_e && es <= bf_e) return KEEP;
-  const int rs = splittable(s, &s->el[l->r]), ss = splittable(s, &s->el[l->s]);
+  const int rs = hr_elem_splittable(s, &s->el[l->r]), ss = hr_elem_splittable(s, &s->el[l->s]);
   if (er >= es) return rs ? SPLIT_R : ss && es > bf_e ? SPLIT_S : KEEP;
   return ss ? SPLIT_S : rs && er > bf_e ? SPLIT_R : KEEP;
 }

@@ -18,10 +18,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* The oracle's reference radiosity (bref, set here) is at least this fraction of the radiosity
- * unit, so that elements in the dark are not refined for light nobody sees. */
-#define BREF_FLOOR 0.1
-
 static inline double max3(const double *v) {
   double x = v[0] > v[1] ? v[0] : v[1];
   return x > v[2] ? x : v[2];
@@ -34,7 +30,7 @@ static void pp_down(hr_solver *s, int32_t idx, const double down[5], double g[5]
   g[2] = down[2] + s->G[idx][2];
   g[3] = down[3] + s->Gu[idx];
   g[4] = down[4] + s->Gf[idx];
-  const double floor = BREF_FLOOR * s->unit, br = s->rho_max[idx] * g[3];
+  const double floor = HR_BREF_FLOOR * s->unit, br = s->rho_max[idx] * g[3];
   s->bref[idx] = br > floor ? br : floor;
 }
 

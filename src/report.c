@@ -73,6 +73,8 @@ hr_status hr_report_json(const char *path, const hr_solver *s, const hr_options 
   fprintf(f, "  \"elements_all\": %lld,\n", (long long)t.elements_all);
   fprintf(f, "  \"links\": %lld,\n", (long long)t.links);
   fprintf(f, "  \"initial_links\": %lld,\n", (long long)t.initial_links);
+  fprintf(f, "  \"clusters\": %lld,\n", (long long)t.clusters);
+  fprintf(f, "  \"cluster_links\": %lld,\n", (long long)t.cluster_links);
   fprintf(f, "  \"iterations\": %d,\n", t.iterations);
   fprintf(f, "  \"rays\": %lld,\n", (long long)t.rays);
   fprintf(f, "  \"converged\": %s,\n", t.converged ? "true" : "false");
@@ -83,9 +85,10 @@ hr_status hr_report_json(const char *path, const hr_solver *s, const hr_options 
   fprintf(f,
           "  \"options\": {\"bf_low\": %g, \"bf_start\": %g, \"bf_factor\": %g, "
           "\"area_min\": %g, \"b_eps\": %g, \"b_max\": %g, \"relax\": %s, \"rays\": %d, "
-          "\"seed\": %llu},\n",
+          "\"seed\": %llu, \"cluster\": \"%s\"},\n",
           o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max,
-          o->relax ? "true" : "false", o->rays, (unsigned long long)o->seed);
+          o->relax ? "true" : "false", o->rays, (unsigned long long)o->seed,
+          o->cluster == HR_CLUSTER_ON ? "on" : o->cluster == HR_CLUSTER_OFF ? "off" : "auto");
   fprintf(f,
           "  \"time_s\": {\"init_graph\": %.6f, \"refine\": %.6f, \"gather\": %.6f, "
           "\"push_pull\": %.6f, \"balance\": %.6f, \"total\": %.6f}\n",

@@ -8,6 +8,7 @@
  * scheduling. */
 #include "mpi/dist.h"
 #include "partition/partition.h"
+#include "cluster.h"
 #include "solver_impl.h"
 #include "vec.h"
 
@@ -123,6 +124,7 @@ void hr_solver_destroy(hr_solver **ps) {
   hr_solver_set_progress(s, NULL, NULL); /* drops its entry in progress.c's table */
   hr_vis_destroy(&s->vis);
   hr_shaft_index_destroy(&s->shaft);
+  hr_cluster_free(&s->cl);
   free(s->el);
   free(s->B);
   free(s->Bs);
@@ -242,11 +244,20 @@ static void recompute_owners(hr_solver *s) {
   for (int64_t e = 0; e < s->nel; e++) s->eown[e] = hr_owner_of(s, s->el[e].gid);
 }
 
+int hr_solver_clustered(const hr_solver *s) {
+  return hr_cluster_wanted(&s->opt, s->scene->nsurfs);
+}
+
 hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uint64_t scatter,
                              hr_err *err) {
   if (s->started) return hr_err_set(err, HR_ERR_INVALID, "hr_solver_set_dist: solver has run");
   const int P = hr_dist_size(d), n = s->scene->nsurfs;
   if (!d || P == 1) return HR_OK; /* one process: nothing to spread */
+  if (hr_solver_clustered(s))
+    return hr_err_set(err, HR_ERR_INVALID,
+                      "%s: clustering (--cluster) does not run over several processes yet; "
+                      "use one process with threads",
+                      s->scene->name);
   if (owner)
     for (int i = 0; i < n; i++)
       if (owner[i] < 0 || owner[i] >= P)
@@ -389,14 +400,17 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
   double ta = hr_now(), ma = mpi_secs(s);
   *nnew = 0;
   if (s->iterations > 0 && (st = hr_link_refine(s, s->bf_e, nnew, err)) != HR_OK) return st;
+  if (s->iterations > 0 && (st = hr_cluster_refine(s, s->bf_e, nnew, err)) != HR_OK) return st;
   st = hr_link_sort(s);
   if ((st = hr_dist_agree(s, st == HR_OK ? st : hr_err_set(err, st, "out of memory"), err)))
     return st;
   hr_dist_sum_i64(s->dist, nnew, 1);
   double tb = hr_now(), mb = mpi_secs(s);
   gather(s);
+  hr_cluster_gather(s);
   double tc = hr_now(), mc = mpi_secs(s), abs = 0;
   if ((st = hr_push_pull(s, &abs, err)) != HR_OK) return st;
+  hr_cluster_pull(s);
   hr_solver_sync_counts(s);
   *change = abs / s->unit;
   if ((st = hr_dist_agree(s, check_physical(s, err), err)) != HR_OK) return st;
@@ -541,7 +555,8 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
      * next iteration's. */
     if (cb) {
       hr_iter_info info = {s->iterations, bf_e, s->dist ? s->g_leaves : count_leaves(s),
-                           s->dist ? s->g_links : s->nlinks - s->ndead, change, s->t.total};
+                           s->dist ? s->g_links : s->nlinks - s->ndead + hr_cluster_links(s),
+                           change, s->t.total};
       int64_t stop = cb(ud, s, &info) != 0;
       hr_dist_max_i64(s->dist, &stop, 1); /* every rank stops after the same iteration */
       if (stop && !s->done) {
@@ -560,7 +575,9 @@ void hr_solver_stats(const hr_solver *s, hr_stats *st) {
   st->npolys = s->scene->npolys;
   st->elements = s->dist ? s->g_leaves : count_leaves(s);
   st->elements_all = s->dist ? s->g_nel : s->nel;
-  st->links = s->dist ? s->g_links : s->nlinks - s->ndead;
+  st->links = s->dist ? s->g_links : s->nlinks - s->ndead + hr_cluster_links(s);
+  st->clusters = hr_cluster_count(s);
+  st->cluster_links = hr_cluster_links(s);
   st->initial_links = s->dist ? s->g_initial : s->initial_links;
   st->iterations = s->iterations;
   st->rays = s->dist ? s->g_rays : s->rays;

@@ -21,6 +21,12 @@
 #define HR_GID_DEPTH 20
 #define HR_GID_PATH_BITS 41
 
+/* The oracle's reference radiosity (bref) is at least this fraction of the radiosity unit, so
+ * that elements in the dark are not refined for light nobody sees (pushpull.c, cluster.c). */
+#define HR_BREF_FLOOR 0.1
+
+typedef struct hr_clusters hr_clusters;
+
 /* Loops shorter than this run on one thread: a parallel region costs more than the work. */
 #define PAR_MIN 100000
 
@@ -100,6 +106,7 @@ struct hr_solver {
    * for dead links). */
   int32_t *ls;
   float *lfo;
+  hr_clusters *cl;    /* clustering (cluster.c); NULL without */
   /* progress of Figure 3 (what a checkpoint holds beside the graph) */
   int started;        /* initial linking done */
   int done;           /* the last iteration has run */
@@ -191,6 +198,11 @@ void hr_elem_prune(hr_solver *s);
 /* Estimates the open fraction (hr_vf_open) of elements [lo, hi), in parallel; needs s->vis. */
 void hr_elem_open(hr_solver *s, int64_t lo, int64_t hi);
 
+/* 1 if element 'e' may be split (above A_e and not at the deepest level). */
+static inline int hr_elem_splittable(const hr_solver *s, const hr_elem *e) {
+  return e->area > s->area_min && (e->child >= 0 || e->depth < HR_GID_DEPTH);
+}
+
 /* The geometry of element 'e' for the form-factor and visibility kernels. */
 static inline hr_ff_elem hr_elem_geom(const hr_solver *s, const hr_elem *e) {
   const hr_surface *f = &s->scene->surfs[e->surf];
@@ -207,6 +219,8 @@ hr_status hr_link_init(hr_solver *s, hr_err *err);          /* paper 2.2.1 */
 /* One refinement pass at threshold 'bf_e' (relative); returns new link count through 'nnew'. */
 hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err); /* 2.2.2 */
 hr_status hr_link_sort(hr_solver *s); /* groups links by receiver (rstart, xstart/xidx) */
+/* Clustering: the element link i <- j between elements of two surfaces (see link.c). */
+int hr_link_pair(const hr_solver *s, int32_t i, int32_t j, hr_link *out, int64_t *rays);
 /* Distributed runs (collectives): elements and links to their owners after the owner function
  * changed; and subscriptions of this rank's ghost sources at their owners. */
 hr_status hr_link_migrate(hr_solver *s, hr_err *err);

@@ -810,8 +810,10 @@ static void usage(void) {
       "  --seed N             jitter seed (0..2^64-1, default %llu)\n"
       "  --threads N          worker threads (0..%d, default 0: all cores)\n"
       "  --max-iters N        stop after N iterations (1..%d, default %d)\n"
-      "  --max-pairs N        refuse scenes with more surface pairs than N (0: no limit,\n"
-      "                       default %g)\n"
+      "  --cluster MODE       hierarchical clustering: auto (default: on for scenes with\n"
+      "                       more surface pairs than --max-pairs), on or off\n"
+      "  --max-pairs N        surface pairs above which --cluster auto clusters and\n"
+      "                       --cluster off refuses the scene (0: no limit, default %g)\n"
       "  -h, --help           this help\n"
       "  --version            print the version (hrad MAJOR.MINOR.PATCH) and exit\n"
       "\n"
@@ -1070,6 +1072,12 @@ static void parse_args(cli *c, int argc, char **argv) {
     } else if (!strcmp(a, "--b-max")) {
       const char *v = NEXT();
       if (!((o->b_max = parse_real(a, v)) > 0)) die_usage("--b-max must be > 0, got '%s'", v);
+    } else if (!strcmp(a, "--cluster")) {
+      const char *v = NEXT();
+      if (!strcmp(v, "auto")) o->cluster = HR_CLUSTER_AUTO;
+      else if (!strcmp(v, "on")) o->cluster = HR_CLUSTER_ON;
+      else if (!strcmp(v, "off")) o->cluster = HR_CLUSTER_OFF;
+      else die_usage("--cluster must be auto, on or off, got '%s'", v);
     } else if (!strcmp(a, "--max-pairs")) {
       const char *v = NEXT();
       if (!((o->max_links = parse_real(a, v)) >= 0))
@@ -2081,6 +2089,10 @@ int main(int argc, char **argv) {
   else hr_scene_auto_camera(scene, &c.cam);
   hr_solver *s = NULL;
   check(hr_solver_create(scene, &c.opt, &s, &err), &err);
+  if ((c.ckpt || c.resume) && hr_solver_clustered(s))
+    fail("%s: --checkpoint and --resume do not work with clustering yet (--cluster off, or a "
+        "scene under --max-pairs surface pairs)",
+        c.scene_arg);
   if (hr_dist_size(g_dist) > 1) { /* --balance random:N scatters elements (N = 0 acts as 1) */
     const uint64_t scatter = c.balance_random ? (c.balance_seed ? c.balance_seed : 1) : 0;
     check(hr_solver_set_dist(s, g_dist, NULL, scatter, &err), &err);

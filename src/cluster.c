@@ -1,0 +1,846 @@
+/* cluster.c: hierarchical clustering (see cluster.h and docs/design.md, "Clustering").
+ *
+ * The hierarchy: a binary tree over the surfaces, split at the median centroid along the longest
+ * axis of the centroids' box (deterministic: ties go by surface id), clusters numbered in
+ * preorder so that a parent comes before its children. Each cluster knows its surfaces (a range
+ * of 'perm'), its bounding box and sphere, its area, the largest reflectance of its surfaces and
+ * N_lm = sum_i A_i Y_lm(n_i), the order-2 spherical harmonics of its area-weighted normals.
+ *
+ * Transfer (oriented on both sides in the mean, Sillion's "directional" cluster simplified):
+ *  - A cluster link's form factor F is the receiver-area mean of the exact point form factor,
+ *    estimated by k rays between points drawn by area on the two nodes' surfaces (cosines
+ *    clamped at 0, so a surface turned away neither sends nor receives), keyed by the two ids so
+ *    that it does not depend on threads. The source sends its surfaces' area-weighted mean
+ *    radiosity.
+ *  - A cluster receives the power F A_R B_S as an incident field from the direction d of the
+ *    source, kept as order-2 spherical harmonics (9 numbers a channel, Ramamoorthi & Hanrahan
+ *    2001: the clamped-cosine irradiance of any incident field to a few per cent). The field
+ *    is scaled so that the cluster's surfaces together receive exactly that power (the
+ *    normalisation sum_lm A_l Y_lm(d) N_lm), flows unchanged to the child clusters, and a
+ *    surface with normal n gets the irradiance E(n) = sum_lm A_l L_lm Y_lm(n), at least 0.
+ *  - Refinement: a link is kept when rho_R F_max (B_S k + dB_S) <= BF_e bref_R, with F_max =
+ *    min(1, A_S / (pi d^2)) for the gap d between the bounding spheres, k = min(1, (r_R + r_S)
+ *    / d) how much the kernel varies over the two, B_S the source's mean and dB_S the range of
+ *    its surfaces' radiosities; else the larger cluster opens. Two surfaces make an element
+ *    link (link.c) and refine from then on as elements do. */
+#include "cluster.h"
+#include "solver_impl.h"
+#include "vec.h"
+
+#include <assert.h>
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define NCH 5 /* field channels: RGB, max channel (for Gu), 1 (for Gf) */
+
+typedef struct cnode {
+  int32_t child[2]; /* node ids */
+  int32_t lo, hi;   /* surfaces perm[lo, hi) */
+  hr_vec3 bmin, bmax, c;
+  double rad, area;
+} cnode;
+
+typedef struct clink {
+  int32_t r, s; /* node ids: receiver, source */
+  float F;      /* receiver-area mean form factor with visibility; < 0: not estimated yet */
+  float kf;     /* for a cluster receiver: field per unit source radiosity, F A_R / D */
+  float d[3];   /* unit direction from the receiver's centre to the source's */
+  /* The oracle's geometry, computed once: the form-factor bound, how much the kernel varies
+   * over the two nodes (both < 0 until first decided) and twice the unoccluded estimate (< 0
+   * until needed). */
+  float fb, kv, fu2;
+} clink;
+
+struct hr_clusters {
+  int32_t n, root; /* clusters; the root's node id */
+  double size;     /* the root's bounding-sphere radius */
+  cnode *node;
+  int32_t *perm;
+  double *cum;        /* cum[k]: area of perm[0, k) */
+  double *srad;       /* per surface: bounding-sphere radius about its centroid */
+  double (*nsh)[9];   /* per cluster: N_lm */
+  double *rho;        /* per cluster: largest reflectance channel of its surfaces */
+  double (*Bm)[3];    /* per cluster: area-weighted mean of its surfaces' sent radiosity */
+  double *bhi, *blo;  /* per cluster: range of its surfaces' radiosities (largest channel) */
+  double *bref;       /* per cluster: area-weighted mean reference radiosity of its surfaces */
+  double (*L)[NCH][9]; /* per cluster: incident field, A_l-weighted */
+  int initial;        /* before the first pull: reference radiosities are the floor */
+  clink *links;
+  int64_t nlinks;
+};
+
+const double hr_sh_alpha[9] = {M_PI, 2 * M_PI / 3, 2 * M_PI / 3, 2 * M_PI / 3, M_PI / 4,
+                               M_PI / 4, M_PI / 4, M_PI / 4, M_PI / 4};
+
+void hr_sh9(const double d[3], double y[9]) {
+  const double x = d[0], yy = d[1], z = d[2];
+  y[0] = 0.282095;
+  y[1] = 0.488603 * yy;
+  y[2] = 0.488603 * z;
+  y[3] = 0.488603 * x;
+  y[4] = 1.092548 * x * yy;
+  y[5] = 1.092548 * yy * z;
+  y[6] = 0.315392 * (3 * z * z - 1);
+  y[7] = 1.092548 * x * z;
+  y[8] = 0.546274 * (x * x - yy * yy);
+}
+
+static inline double max3(const double *v) {
+  double x = v[0] > v[1] ? v[0] : v[1];
+  return x > v[2] ? x : v[2];
+}
+
+int hr_cluster_wanted(const hr_options *o, int nsurfs) {
+  if (o->cluster == HR_CLUSTER_ON) return 1;
+  if (o->cluster == HR_CLUSTER_OFF) return 0;
+  const double pairs = 0.5 * (double)nsurfs * (double)(nsurfs - 1);
+  return o->max_links > 0 && pairs > o->max_links;
+}
+
+/* ---------------------------------------------------------------- the hierarchy */
+
+typedef struct builder {
+  const hr_scene *sc;
+  hr_clusters *cl;
+  const hr_vec3 *cen; /* surface centroids */
+  int axis;
+} builder;
+
+static double key(const builder *b, int32_t i) {
+  const hr_vec3 c = b->cen[i];
+  return b->axis == 0 ? c.x : b->axis == 1 ? c.y : c.z;
+}
+
+static int before(const builder *b, int32_t i, int32_t j) {
+  const double ki = key(b, i), kj = key(b, j);
+  return ki < kj || (ki == kj && i < j);
+}
+
+/* Quickselect: perm[lo, hi) rearranged so that perm[m] is in place and nothing before it comes
+ * after it (a total order: ties by surface id). */
+static void select_nth(const builder *b, int32_t *p, int32_t lo, int32_t hi, int32_t m) {
+  while (hi - lo > 1) {
+    const int32_t mid = lo + (hi - lo) / 2;
+    /* median of three as the pivot */
+    int32_t a = p[lo], c = p[mid], e = p[hi - 1], piv;
+    if (before(b, a, c)) piv = before(b, c, e) ? c : (before(b, a, e) ? e : a);
+    else piv = before(b, a, e) ? a : (before(b, c, e) ? e : c);
+    int32_t i = lo, j = hi - 1;
+    while (i <= j) {
+      while (before(b, p[i], piv)) i++;
+      while (before(b, piv, p[j])) j--;
+      if (i <= j) {
+        int32_t t = p[i];
+        p[i] = p[j], p[j] = t;
+        i++, j--;
+      }
+    }
+    if (m <= j) hi = j + 1;
+    else if (m >= i) lo = i;
+    else return;
+  }
+}
+
+static void surf_box(const hr_surface *f, hr_vec3 *lo, hr_vec3 *hi) {
+  *lo = *hi = f->v[0];
+  for (int k = 1; k < f->nverts; k++) *lo = v3_min(*lo, f->v[k]), *hi = v3_max(*hi, f->v[k]);
+}
+
+/* Builds the subtree over perm[lo, hi) (hi - lo >= 2); returns its node id. */
+static int32_t build(builder *b, int32_t lo, int32_t hi) {
+  hr_clusters *cl = b->cl;
+  const int32_t c = cl->n++;
+  cnode *nd = &cl->node[c];
+  nd->lo = lo, nd->hi = hi;
+  hr_vec3 clo = b->cen[cl->perm[lo]], chi = clo;
+  for (int32_t k = lo + 1; k < hi; k++)
+    clo = v3_min(clo, b->cen[cl->perm[k]]), chi = v3_max(chi, b->cen[cl->perm[k]]);
+  const hr_vec3 ext = v3_sub(chi, clo);
+  b->axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : ext.y >= ext.z ? 1 : 2;
+  const int32_t m = lo + (hi - lo) / 2;
+  select_nth(b, cl->perm, lo, hi, m);
+  int32_t ch[2];
+  const int32_t r[2][2] = {{lo, m}, {m, hi}};
+  for (int q = 0; q < 2; q++)
+    ch[q] = r[q][1] - r[q][0] == 1 ? cl->perm[r[q][0]] : -1 - build(b, r[q][0], r[q][1]);
+  nd = &cl->node[c]; /* (no reallocation: the array holds n - 1 nodes from the start) */
+  nd->child[0] = ch[0], nd->child[1] = ch[1];
+  return c;
+}
+
+/* Boxes, spheres, areas, reflectances and N_lm, children before parents. */
+static void summarise(hr_solver *s, hr_clusters *cl) {
+  const hr_scene *sc = s->scene;
+  for (int32_t c = cl->n - 1; c >= 0; c--) {
+    cnode *nd = &cl->node[c];
+    nd->area = 0;
+    cl->rho[c] = 0;
+    memset(cl->nsh[c], 0, sizeof cl->nsh[c]);
+    for (int q = 0; q < 2; q++) {
+      const int32_t id = nd->child[q];
+      hr_vec3 lo, hi;
+      double a, rho, nsh[9];
+      if (id >= 0) {
+        const hr_surface *f = &sc->surfs[id];
+        surf_box(f, &lo, &hi);
+        a = s->el[id].area;
+        rho = s->rho_max[id];
+        const double n[3] = {f->normal.x, f->normal.y, f->normal.z};
+        hr_sh9(n, nsh);
+        for (int k = 0; k < 9; k++) nsh[k] *= a;
+      } else {
+        const cnode *cc = &cl->node[-1 - id];
+        lo = cc->bmin, hi = cc->bmax, a = cc->area, rho = cl->rho[-1 - id];
+        memcpy(nsh, cl->nsh[-1 - id], sizeof nsh);
+      }
+      nd->bmin = q ? v3_min(nd->bmin, lo) : lo;
+      nd->bmax = q ? v3_max(nd->bmax, hi) : hi;
+      nd->area += a;
+      cl->rho[c] = rho > cl->rho[c] ? rho : cl->rho[c];
+      for (int k = 0; k < 9; k++) cl->nsh[c][k] += nsh[k];
+    }
+    nd->c = v3_scale(v3_add(nd->bmin, nd->bmax), 0.5);
+    nd->rad = 0.5 * v3_len(v3_sub(nd->bmax, nd->bmin));
+  }
+}
+
+static hr_status build_tree(hr_solver *s, hr_clusters *cl) {
+  const hr_scene *sc = s->scene;
+  const int n = sc->nsurfs;
+  hr_vec3 *cen = malloc((size_t)n * sizeof *cen);
+  cl->perm = malloc((size_t)n * sizeof *cl->perm);
+  cl->cum = malloc(((size_t)n + 1) * sizeof *cl->cum);
+  cl->srad = malloc((size_t)n * sizeof *cl->srad);
+  const size_t m = n > 1 ? (size_t)n - 1 : 1;
+  cl->node = calloc(m, sizeof *cl->node);
+  cl->nsh = malloc(m * sizeof *cl->nsh);
+  cl->rho = malloc(m * sizeof *cl->rho);
+  cl->Bm = calloc(m, sizeof *cl->Bm);
+  cl->bhi = calloc(m, sizeof *cl->bhi);
+  cl->blo = calloc(m, sizeof *cl->blo);
+  cl->bref = calloc(m, sizeof *cl->bref);
+  cl->L = calloc(m, sizeof *cl->L);
+  if (!cen || !cl->perm || !cl->cum || !cl->srad || !cl->node || !cl->nsh || !cl->rho ||
+      !cl->Bm || !cl->bhi || !cl->blo || !cl->bref || !cl->L) {
+    free(cen);
+    return HR_ERR_NOMEM;
+  }
+  for (int i = 0; i < n; i++) {
+    cen[i] = s->el[i].c;
+    cl->perm[i] = i;
+    double r = 0;
+    for (int k = 0; k < sc->surfs[i].nverts; k++) {
+      double d = v3_len(v3_sub(sc->surfs[i].v[k], cen[i]));
+      r = d > r ? d : r;
+    }
+    cl->srad[i] = r;
+  }
+  builder b = {sc, cl, cen, 0};
+  cl->n = 0;
+  cl->root = n >= 2 ? -1 - build(&b, 0, n) : 0;
+  free(cen);
+  cl->cum[0] = 0;
+  for (int k = 0; k < n; k++) cl->cum[k + 1] = cl->cum[k] + s->el[cl->perm[k]].area;
+  summarise(s, cl);
+  cl->size = cl->n > 0 ? cl->node[0].rad : cl->srad[0];
+  return HR_OK;
+}
+
+/* ---------------------------------------------------------------- nodes */
+
+static uint64_t node_gid(const hr_solver *s, int32_t id) {
+  return id >= 0 ? s->el[id].gid : (UINT64_C(1) << 63) | (uint64_t)(-1 - id);
+}
+
+static double elem_radius(const hr_solver *s, int32_t e) {
+  const hr_elem *el = &s->el[e];
+  const int nv = s->scene->surfs[el->surf].nverts;
+  double r = 0;
+  for (int k = 0; k < nv; k++) {
+    const double d = v3_len(v3_sub(el->p[k], el->c));
+    r = d > r ? d : r;
+  }
+  return r;
+}
+
+static void node_sphere(const hr_solver *s, int32_t id, hr_vec3 *c, double *r, double *a) {
+  const hr_clusters *cl = s->cl;
+  if (id >= 0) {
+    *c = s->el[id].c, *a = s->el[id].area;
+    *r = s->el[id].parent < 0 ? cl->srad[id] : elem_radius(s, id);
+  } else {
+    const cnode *nd = &cl->node[-1 - id];
+    *c = nd->c, *r = nd->rad, *a = nd->area;
+  }
+}
+
+/* The radiosity a node sends (RGB), its mean and range in the largest channel. */
+static const double *node_b(const hr_solver *s, int32_t id, double *mean, double *range) {
+  const hr_clusters *cl = s->cl;
+  if (id >= 0) {
+    *mean = max3(s->Bs[id]), *range = s->bvar[id];
+    return s->Bs[id];
+  }
+  const int32_t c = -1 - id;
+  *mean = max3(cl->Bm[c]), *range = cl->bhi[c] - cl->blo[c];
+  return cl->Bm[c];
+}
+
+static void node_recv(const hr_solver *s, int32_t id, double *rho, double *bref) {
+  const hr_clusters *cl = s->cl;
+  const double floor = HR_BREF_FLOOR * s->unit;
+  if (id >= 0) {
+    *rho = s->rho_max[id];
+    *bref = cl->initial ? floor : s->bref[id];
+  } else {
+    *rho = cl->rho[-1 - id];
+    *bref = cl->initial ? floor : cl->bref[-1 - id];
+  }
+}
+
+/* 1 when the whole box lies on or behind the plane of surface f (it cannot see f's front). */
+static int box_behind(const hr_surface *f, hr_vec3 lo, hr_vec3 hi, double tol) {
+  for (int k = 0; k < 8; k++) {
+    const hr_vec3 p = {k & 1 ? hi.x : lo.x, k & 2 ? hi.y : lo.y, k & 4 ? hi.z : lo.z};
+    if (v3_dot(v3_sub(p, f->v[0]), f->normal) > tol) return 0;
+  }
+  return 1;
+}
+
+/* A point of node 'id' drawn by area from the uniforms u[0..2], with its normal. */
+static hr_vec3 node_point(const hr_solver *s, int32_t id, const double u[3], hr_vec3 *n) {
+  const hr_clusters *cl = s->cl;
+  int32_t surf = id;
+  if (id < 0) {
+    const cnode *nd = &cl->node[-1 - id];
+    const double t = cl->cum[nd->lo] + u[0] * (cl->cum[nd->hi] - cl->cum[nd->lo]);
+    int32_t lo = nd->lo, hi = nd->hi - 1; /* the last k with cum[k] <= t */
+    while (lo < hi) {
+      int32_t m = lo + (hi - lo + 1) / 2;
+      if (cl->cum[m] <= t) lo = m;
+      else hi = m - 1;
+    }
+    surf = cl->perm[lo];
+  }
+  const hr_surface *f = &s->scene->surfs[s->el[surf].surf];
+  const hr_vec3 *p = id >= 0 ? s->el[id].p : f->v;
+  *n = f->normal;
+  if (f->nverts == 3) {
+    const double a = sqrt(u[1]);
+    return v3_add(v3_scale(p[0], 1 - a),
+                  v3_add(v3_scale(p[1], a * (1 - u[2])), v3_scale(p[2], a * u[2])));
+  }
+  return v3_lerp(v3_lerp(p[0], p[1], u[1]), v3_lerp(p[3], p[2], u[1]), u[2]);
+}
+
+/* ---------------------------------------------------------------- link estimate */
+
+#define CL_RAYS_MAX 64
+
+static inline double unit_of(uint64_t h) { return (double)(h >> 11) * 0x1.0p-53; }
+
+static int link_rays(const hr_solver *s) {
+  const int k = s->opt.rays / 2;
+  return k < 1 ? 1 : k > CL_RAYS_MAX ? CL_RAYS_MAX : k;
+}
+
+/* Draws the k point pairs of link (r <- sn), keyed by the two ids and the stream (the oracle
+ * decides on one set and the estimate rests on another: deciding on the estimate's own samples
+ * would keep the links whose samples happen to fall short, and bias the light low): the kernel
+ * weights of the pairs that face each other into w (cos cos / (pi r^2 + reg)) and their lifted
+ * ends into org and dst; returns how many. */
+static int draw(const hr_solver *s, int32_t r, int32_t sn, int k, int stream, double reg,
+                double *w, float *org, float *dst) {
+  const uint64_t key = hr_hash4(s->opt.seed, node_gid(s, r), node_gid(s, sn), 11 + stream);
+  const double lift = s->vf.lift;
+  int m = 0;
+  for (int q = 0; q < k; q++) {
+    double u[6];
+    for (int j = 0; j < 6; j++) u[j] = unit_of(hr_hash4(key, (uint64_t)q, (uint64_t)j, 0));
+    hr_vec3 nx, ny;
+    const hr_vec3 x = node_point(s, r, u, &nx), y = node_point(s, sn, u + 3, &ny);
+    const hr_vec3 dv = v3_sub(y, x);
+    const double r2 = v3_dot(dv, dv);
+    if (!(r2 > 0)) continue;
+    const double inv = 1 / sqrt(r2), cx = v3_dot(nx, dv) * inv, cy = -v3_dot(ny, dv) * inv;
+    if (cx <= 0 || cy <= 0) continue;
+    w[m] = cx * cy / (M_PI * r2 + reg);
+    if (org) {
+      const hr_vec3 o = v3_add(x, v3_scale(nx, lift)), e = v3_add(y, v3_scale(ny, lift));
+      org[3 * m] = (float)o.x, org[3 * m + 1] = (float)o.y, org[3 * m + 2] = (float)o.z;
+      dst[3 * m] = (float)e.x, dst[3 * m + 1] = (float)e.y, dst[3 * m + 2] = (float)e.z;
+    }
+    m++;
+  }
+  return m;
+}
+
+/* Links between nodes of at most this many surface pairs get their unoccluded form factor as
+ * the sum over the pairs of the exact form factors (quadrature on the receiver)
+ * where they are near (the point kernel then varies too much for a few samples: measured on a
+ * tessellated furnace, 8 samples left single triangles up to 10% bright, and 128 still 1.5%).
+ * Receivers at most A_e (below the mesh's resolution) take one point rather than hr_ff_pair's
+ * adaptive rule: the conference room's refinement at each new BF_e 35-55% faster, the same
+ * furnace error; for every receiver, one point put the Cornell box's walls 1.7% RMS off. 16
+ * pairs instead of 64 made more links split and was slower. */
+#define EXACT_PAIRS 64
+
+/* The surfaces of node id as elements (a cluster's surface roots); at most max, else -1. */
+static int node_elems(const hr_solver *s, int32_t id, int32_t *out, int max) {
+  if (id >= 0) {
+    out[0] = id;
+    return 1;
+  }
+  const cnode *nd = &s->cl->node[-1 - id];
+  if (nd->hi - nd->lo > max) return -1;
+  for (int32_t k = nd->lo; k < nd->hi; k++) out[k - nd->lo] = s->cl->perm[k];
+  return nd->hi - nd->lo;
+}
+
+/* The unoccluded form factor of link (r <- sn), receiver-area mean, by quadrature over the
+ * surface pairs, or -1 when the two nodes make more than EXACT_PAIRS surface pairs. */
+static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn) {
+  int32_t er[EXACT_PAIRS], es[EXACT_PAIRS];
+  const int nr = node_elems(s, r, er, EXACT_PAIRS), ns = node_elems(s, sn, es, EXACT_PAIRS);
+  if (nr < 0 || ns < 0 || nr * ns > EXACT_PAIRS) return -1;
+  double f = 0, ar = 0;
+  for (int i = 0; i < nr; i++) {
+    const hr_ff_elem gi = hr_elem_geom(s, &s->el[er[i]]);
+    double fi = 0;
+    for (int j = 0; j < ns; j++) {
+      const hr_ff_elem gj = hr_elem_geom(s, &s->el[es[j]]);
+      fi += hr_ff_pair(&gi, &gj, gi.area <= s->area_min ? 1 : 0, NULL);
+    }
+    f += gi.area * fi;
+    ar += gi.area;
+  }
+  return ar > 0 ? f / ar : 0;
+}
+
+/* Nodes are near when the gap between their spheres is below 1 / NEAR_KV times the sum of
+ * their radii: the point kernel then varies so much over them that a few samples mislead
+ * (measured on a tessellated furnace at a gap of 2 radii: single links 2x off). */
+#define NEAR_KV 0.2f
+
+static int near_pair(const clink *l) { return l->kv >= NEAR_KV; }
+
+/* The kernel's regularisation pi r^2 + reg: A_S / k for near nodes, where one sample pair can
+ * come arbitrarily close, else 0 (a term of A_S / k biased far links from large sources low:
+ * 8% on a tessellated furnace). */
+static double link_reg(const clink *l, double as, int k) { return near_pair(l) ? as / k : 0; }
+
+/* The unoccluded form factor of link (r <- sn): exact for small near links (-1 for larger
+ * near ones), else from the decision stream's point pairs, without rays. */
+static double unoccluded(const hr_solver *s, const clink *l, double as) {
+  if (near_pair(l)) /* -1 (no estimate) without the exact value: a few samples of a near pair */
+    return exact_unoccluded(s, l->r, l->s); /* were measured up to 13x low */
+  double w[CL_RAYS_MAX], f = 0;
+  const int k = link_rays(s), m = draw(s, l->r, l->s, k, 1, link_reg(l, as, k), w, NULL, NULL);
+  for (int q = 0; q < m; q++) f += w[q];
+  return f * as / k;
+}
+
+/* Below this normalisation (per unit receiver area; 1/4 for an even spread) a cluster link's
+ * power goes to its receiver's surfaces evenly instead of by their orientation. */
+#define ISO_MIN 0.05
+
+/* F, kf and d of link l by k rays between area-drawn points of its two nodes (half as many for
+ * a weak link). */
+static void estimate(const hr_solver *s, clink *l, int weak, int64_t *rays) {
+  const hr_clusters *cl = s->cl;
+  hr_vec3 cr, cs;
+  double rr, rs, ar, as;
+  node_sphere(s, l->r, &cr, &rr, &ar);
+  node_sphere(s, l->s, &cs, &rs, &as);
+  const int k = weak && link_rays(s) > 1 ? link_rays(s) / 2 : link_rays(s);
+  float org[CL_RAYS_MAX * 3], dst[CL_RAYS_MAX * 3];
+  double w[CL_RAYS_MAX];
+  uint8_t vis[CL_RAYS_MAX];
+  const int m = draw(s, l->r, l->s, k, 0, link_reg(l, as, k), w, org, dst);
+  double f = 0, wsum = 0;
+  if (m > 0) {
+    hr_vis_segments(s->vis, m, org, dst, -1, -1, vis);
+    *rays += m;
+    for (int q = 0; q < m; q++) f += vis[q] ? w[q] : 0, wsum += w[q];
+  }
+  /* the decision's exact value where it has one (fu2 is twice it; 2: none) */
+  const double fu = !near_pair(l) ? -1
+                    : l->fu2 >= 0 && l->fu2 < 2 ? 0.5 * l->fu2
+                                                : exact_unoccluded(s, l->r, l->s);
+  if (fu >= 0) f = wsum > 0 ? fu * f / wsum : 0; /* exact times the visible fraction */
+  else f *= as / k;
+  f = f < 1 ? f : 1;
+  /* The direction the light comes from: the kernel-weighted mean of the seen samples' (the
+   * centres' direction misleads for a large near source: behind the receiver's plane, it lost
+   * such links whole) */
+  hr_vec3 d = {0, 0, 0};
+  for (int q = 0; q < m; q++) {
+    if (!vis[q]) continue;
+    const hr_vec3 u = v3(dst[3 * q] - org[3 * q], dst[3 * q + 1] - org[3 * q + 1],
+                         dst[3 * q + 2] - org[3 * q + 2]);
+    const double ul = v3_len(u);
+    if (ul > 0) d = v3_add(d, v3_scale(u, w[q] / ul));
+  }
+  if (!(v3_len(d) > 0)) d = v3_sub(cs, cr);
+  const double dl = v3_len(d);
+  d = dl > 0 ? v3_scale(d, 1 / dl) : v3(0, 0, 1);
+  l->d[0] = (float)d.x, l->d[1] = (float)d.y, l->d[2] = (float)d.z;
+  l->F = (float)f;
+  l->kf = 0;
+  if (l->r < 0 && f > 0) {
+    const double dd[3] = {d.x, d.y, d.z};
+    double y[9], D = 0;
+    hr_sh9(dd, y);
+    for (int q = 0; q < 9; q++) D += hr_sh_alpha[q] * y[q] * cl->nsh[-1 - l->r][q];
+    /* the receiver's surfaces hardly face d in the model: spread the power evenly (kf < 0) */
+    l->kf = D > ISO_MIN * ar ? (float)(f * ar / D) : (float)(-4 * f);
+  }
+}
+
+/* ---------------------------------------------------------------- refinement */
+
+/* Decisions; C_WEAK keeps a link that brings at most a quarter of the error allowed (its
+ * estimate takes half the rays: visibility noise on it matters a quarter as much). */
+enum { C_DROP, C_KEEP, C_WEAK, C_SPLIT_R, C_SPLIT_S, C_ELEM };
+
+static int node_splittable(const hr_solver *s, int32_t id) {
+  return id < 0 || hr_elem_splittable(s, &s->el[id]);
+}
+
+/* A cluster receives as one (its surfaces' shares by orientation alone) only where that is no
+ * coarser than the mesh: when it is at most A_e, the smallest element, or far from the source
+ * (kv <= KV_RECV), where the light varies little over it. Elsewhere its surfaces' shares differ
+ * by position and by what hides them within it: measured on a closed furnace of 384 triangles,
+ * near-field cluster receivers left triangles 3-6% off although each link's own error was
+ * within BF_e; they add up, all of one sign for a given triangle. */
+#define KV_RECV 0.1f
+static int recv_whole(const hr_solver *s, const clink *l) {
+  return l->kv <= KV_RECV || s->cl->node[-1 - l->r].area <= s->area_min;
+}
+
+/* The oracle's geometry of link l (fb, kv), once. */
+static void link_geometry(const hr_solver *s, clink *l) {
+  hr_vec3 cr, cs;
+  double rr, rs, ar, as;
+  node_sphere(s, l->r, &cr, &rr, &ar);
+  node_sphere(s, l->s, &cs, &rs, &as);
+  const double gap = v3_len(v3_sub(cr, cs)) - rr - rs;
+  l->fb = (float)(gap > 0 ? fmin(1, as / (M_PI * gap * gap)) : 1);
+  l->kv = (float)(gap > 0 ? fmin(1, (rr + rs) / gap) : 1);
+}
+
+/* Keep, drop, split a side, or make it an element link. */
+static int decide(const hr_solver *s, clink *l, double bf_e) {
+  const hr_clusters *cl = s->cl;
+  const hr_scene *sc = s->scene;
+  if (l->r >= 0 && l->s >= 0) return l->r == l->s ? C_DROP : C_ELEM;
+  if (l->r == l->s) return C_SPLIT_R;
+  if (l->fb < 0) {
+    const double tol = 1e-9 * cl->size;
+    if (l->r >= 0) {
+      const cnode *nd = &cl->node[-1 - l->s];
+      if (box_behind(&sc->surfs[s->el[l->r].surf], nd->bmin, nd->bmax, tol)) return C_DROP;
+    } else if (l->s >= 0) {
+      const cnode *nd = &cl->node[-1 - l->r];
+      if (box_behind(&sc->surfs[s->el[l->s].surf], nd->bmin, nd->bmax, tol)) return C_DROP;
+    }
+    link_geometry(s, l);
+  }
+  double mean, range, rho, bref;
+  node_b(s, l->s, &mean, &range);
+  node_recv(s, l->r, &rho, &bref);
+  double lim = bf_e * bref;
+  const double b = mean * l->kv + range;
+  if (l->r < 0 && !recv_whole(s, l)) lim = 0;
+  if (rho * l->fb * b <= lim) return rho * l->fb * b <= 0.25 * lim ? C_WEAK : C_KEEP;
+  /* Near clusters: the bound says nothing (1 where the spheres meet), so the unoccluded form
+   * factor from the link's own point pairs, doubled for its noise, stands in for it. */
+  if (l->fu2 < 0) {
+    hr_vec3 cs;
+    double rs, as;
+    node_sphere(s, l->s, &cs, &rs, &as);
+    const double fu = unoccluded(s, l, as);
+    l->fu2 = fu >= 0 ? (float)(2 * fu) : 2; /* 2: no estimate (never below fb <= 1) */
+  }
+  if (l->fu2 >= 0 && l->fu2 < l->fb && rho * l->fu2 * b <= lim)
+    return rho * l->fu2 * b <= 0.25 * lim ? C_WEAK : C_KEEP;
+  double rr, rs, a;
+  hr_vec3 c;
+  node_sphere(s, l->r, &c, &rr, &a);
+  node_sphere(s, l->s, &c, &rs, &a);
+  /* the larger side opens (a cluster always can; an element above A_e) */
+  const int okr = node_splittable(s, l->r), oks = node_splittable(s, l->s);
+  if (okr && (!oks || rr >= rs)) return C_SPLIT_R;
+  if (oks) return C_SPLIT_S;
+  return C_KEEP; /* an element at A_e and ... (cannot happen: one side is a cluster) */
+}
+
+/* The children of link l under decision dec into kids (at most 4); returns their count.
+ * Elements to split are subdivided already. */
+static int split(const hr_solver *s, const clink *l, int dec, clink *kids) {
+  const hr_clusters *cl = s->cl;
+  const clink z = {0, 0, -1, 0, {0, 0, 0}, -1, -1, -1};
+  int32_t ch[4];
+  const int32_t id = dec == C_SPLIT_R ? l->r : l->s;
+  int nc;
+  if (id < 0) {
+    ch[0] = cl->node[-1 - id].child[0], ch[1] = cl->node[-1 - id].child[1], nc = 2;
+  } else {
+    for (int k = 0; k < 4; k++) ch[k] = s->el[id].child + k;
+    nc = 4;
+  }
+  int n = 0;
+  for (int a = 0; a < nc; a++) {
+    if (l->r == l->s) { /* a cluster's self-link: every ordered pair of its children */
+      for (int b = 0; b < nc; b++) {
+        kids[n] = z;
+        kids[n].r = ch[a], kids[n].s = ch[b];
+        n++;
+      }
+      continue;
+    }
+    kids[n] = z;
+    kids[n].r = dec == C_SPLIT_R ? ch[a] : l->r;
+    kids[n].s = dec == C_SPLIT_R ? l->s : ch[a];
+    n++;
+  }
+  return n;
+}
+
+static hr_status append_links(hr_solver *s, const hr_link *add, const uint8_t *ok, int64_t n,
+                              int64_t *nnew) {
+  int64_t m = 0;
+  for (int64_t i = 0; i < n; i++) m += ok[i];
+  if (m == 0) return HR_OK;
+  if (s->nlinks + m > s->cap_links) {
+    int64_t nc = s->cap_links > 0 ? s->cap_links : 64;
+    while (nc < s->nlinks + m) nc *= 2;
+    hr_link *l = realloc(s->links, (size_t)nc * sizeof *l);
+    if (!l) return HR_ERR_NOMEM;
+    s->links = l, s->cap_links = nc;
+  }
+  for (int64_t i = 0; i < n; i++)
+    if (ok[i]) s->links[s->nlinks++] = add[i];
+  s->sorted = 0;
+  *nnew += m;
+  return HR_OK;
+}
+
+/* How many children split() makes of link l under decision dec. */
+static int kid_count(const hr_solver *s, const clink *l, int dec) {
+  if (dec != C_SPLIT_R && dec != C_SPLIT_S) return 0;
+  const int32_t id = dec == C_SPLIT_R ? l->r : l->s;
+  (void)s;
+  const int nc = id < 0 ? 2 : 4;
+  return l->r == l->s ? nc * nc : nc;
+}
+
+/* Links are decided and made in chunks of this many, each chunk's outputs at offsets counted
+ * beforehand, so that the work runs in parallel, its order does not depend on threads and no
+ * per-link output array is needed. */
+#define CHUNK 4096
+
+hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
+  hr_clusters *cl = s->cl;
+  if (!cl) return HR_OK;
+  int64_t ncur = cl->nlinks, nout = 0, cap_out = ncur > 16 ? ncur : 16;
+  clink *cur = cl->links, *out = malloc((size_t)cap_out * sizeof *out);
+  cl->links = NULL, cl->nlinks = 0;
+  hr_status st = out ? HR_OK : HR_ERR_NOMEM;
+  int64_t rays = 0, made = 0;
+  while (st == HR_OK && ncur > 0) {
+    const int64_t nch = (ncur + CHUNK - 1) / CHUNK;
+    uint8_t *dec = malloc((size_t)ncur);
+    int64_t(*cnt)[3] = calloc((size_t)nch + 1, sizeof *cnt); /* keep, element, kids */
+    if (!dec || !cnt) {
+      free(dec), free(cnt);
+      st = HR_ERR_NOMEM;
+      break;
+    }
+#pragma omp parallel for schedule(dynamic, 1) if (nch > 1) num_threads(s->threads)
+    for (int64_t c = 0; c < nch; c++) {
+      const int64_t hi = (c + 1) * CHUNK < ncur ? (c + 1) * CHUNK : ncur;
+      for (int64_t i = c * CHUNK; i < hi; i++) {
+        const int d = decide(s, &cur[i], bf_e);
+        dec[i] = (uint8_t)d;
+        cnt[c + 1][0] += d == C_KEEP || d == C_WEAK;
+        cnt[c + 1][1] += d == C_ELEM;
+        cnt[c + 1][2] += kid_count(s, &cur[i], d);
+      }
+    }
+    for (int64_t c = 0; c < nch; c++)
+      for (int k = 0; k < 3; k++) cnt[c + 1][k] += cnt[c][k];
+    /* elements that open: subdivided here, in increasing link order (the order does not depend
+     * on threads), with their children's open fractions */
+    const int64_t nel0 = s->nel;
+    for (int64_t i = 0; i < ncur && st == HR_OK; i++) {
+      const int32_t id = dec[i] == C_SPLIT_R ? cur[i].r : dec[i] == C_SPLIT_S ? cur[i].s : -1;
+      if (id >= 0 && s->el[id].child < 0) st = hr_elem_subdivide(s, id);
+    }
+    if (s->nel > nel0) hr_elem_open(s, nel0, s->nel);
+    const int64_t nkeep = cnt[nch][0], nelem = cnt[nch][1], nkids = cnt[nch][2];
+    if (st == HR_OK && nout + nkeep > cap_out) {
+      while (cap_out < nout + nkeep) cap_out *= 2;
+      clink *o = realloc(out, (size_t)cap_out * sizeof *o);
+      if (!o) st = HR_ERR_NOMEM;
+      else out = o;
+    }
+    clink *next = malloc((size_t)(nkids > 0 ? nkids : 1) * sizeof *next);
+    hr_link *el = malloc((size_t)(nelem > 0 ? nelem : 1) * sizeof *el);
+    uint8_t *eok = calloc((size_t)(nelem > 0 ? nelem : 1), 1);
+    if (st == HR_OK && (!next || !el || !eok)) st = HR_ERR_NOMEM;
+    if (st == HR_OK) {
+#pragma omp parallel for schedule(dynamic, 1) reduction(+ : rays, made) if (nch > 1) \
+    num_threads(s->threads)
+      for (int64_t c = 0; c < nch; c++) {
+        const int64_t hi = (c + 1) * CHUNK < ncur ? (c + 1) * CHUNK : ncur;
+        int64_t ko = nout + cnt[c][0], eo = cnt[c][1], no = cnt[c][2];
+        for (int64_t i = c * CHUNK; i < hi; i++) {
+          if (dec[i] == C_KEEP || dec[i] == C_WEAK) {
+            if (cur[i].F < 0) estimate(s, &cur[i], dec[i] == C_WEAK, &rays), made++;
+            out[ko++] = cur[i];
+          } else if (dec[i] == C_ELEM) {
+            eok[eo] = (uint8_t)hr_link_pair(s, cur[i].r, cur[i].s, &el[eo], &rays);
+            eo++;
+          } else if (dec[i] == C_SPLIT_R || dec[i] == C_SPLIT_S) {
+            no += split(s, &cur[i], dec[i], next + no);
+          }
+        }
+      }
+      nout += nkeep;
+      st = append_links(s, el, eok, nelem, nnew);
+    }
+    free(dec), free(cnt), free(el), free(eok);
+    free(cur);
+    cur = next;
+    ncur = st == HR_OK ? nkids : 0;
+  }
+  free(cur);
+  s->rays += rays;
+  *nnew += made;
+  if (st != HR_OK) {
+    free(out);
+    return hr_err_set(err, st, "out of memory in cluster refinement");
+  }
+  cl->links = out;
+  cl->nlinks = nout;
+  return HR_OK;
+}
+
+/* ---------------------------------------------------------------- gather, push, pull */
+
+void hr_cluster_gather(hr_solver *s) {
+  hr_clusters *cl = s->cl;
+  if (!cl) return;
+  memset(cl->L, 0, (size_t)cl->n * sizeof *cl->L);
+  for (int64_t i = 0; i < cl->nlinks; i++) {
+    const clink *l = &cl->links[i];
+    double mean, range;
+    const double *b = node_b(s, l->s, &mean, &range);
+    if (l->r >= 0) {
+      const double f = l->F;
+      for (int c = 0; c < 3; c++) s->G[l->r][c] += f * b[c];
+      s->Gu[l->r] += f * mean;
+      s->Gf[l->r] += f;
+      continue;
+    }
+    if (l->kf == 0) continue;
+    const double d[3] = {l->d[0], l->d[1], l->d[2]}, v[NCH] = {b[0], b[1], b[2], mean, 1};
+    double(*L)[9] = cl->L[-1 - l->r];
+    if (l->kf < 0) { /* even: E(n) = L_00 Y_00 = -kf v / 4 for every n */
+      for (int c = 0; c < NCH; c++) L[c][0] += -l->kf * hr_sh_alpha[0] * 0.282095 * v[c];
+      continue;
+    }
+    double y[9];
+    hr_sh9(d, y);
+    for (int q = 0; q < 9; q++) {
+      const double w = l->kf * hr_sh_alpha[q] * y[q];
+      for (int c = 0; c < NCH; c++) L[c][q] += w * v[c];
+    }
+  }
+  /* push: preorder, so a parent's field is complete before its children take it */
+  for (int32_t c = 0; c < cl->n; c++) {
+    const cnode *nd = &cl->node[c];
+    for (int q = 0; q < 2; q++) {
+      const int32_t id = nd->child[q];
+      if (id < 0) {
+        double(*L)[9] = cl->L[-1 - id];
+        for (int ch = 0; ch < NCH; ch++)
+          for (int k = 0; k < 9; k++) L[ch][k] += cl->L[c][ch][k];
+        continue;
+      }
+      const hr_vec3 nv = s->scene->surfs[id].normal;
+      const double n[3] = {nv.x, nv.y, nv.z};
+      double y[9], e[NCH];
+      hr_sh9(n, y);
+      for (int ch = 0; ch < NCH; ch++) {
+        double x = 0;
+        for (int k = 0; k < 9; k++) x += cl->L[c][ch][k] * y[k];
+        e[ch] = x > 0 ? x : 0;
+      }
+      for (int ch = 0; ch < 3; ch++) s->G[id][ch] += e[ch];
+      s->Gu[id] += e[3];
+      s->Gf[id] += e[4];
+    }
+  }
+}
+
+void hr_cluster_pull(hr_solver *s) {
+  hr_clusters *cl = s->cl;
+  if (!cl) return;
+  for (int32_t c = cl->n - 1; c >= 0; c--) {
+    const cnode *nd = &cl->node[c];
+    double acc[3] = {0, 0, 0}, hi = 0, lo = INFINITY, br = 0;
+    for (int q = 0; q < 2; q++) {
+      const int32_t id = nd->child[q];
+      double a, h, l, r;
+      const double *b;
+      if (id >= 0) {
+        a = s->el[id].area, b = s->Bs[id];
+        const double m = max3(b);
+        h = m + s->bvar[id], l = m - s->bvar[id] > 0 ? m - s->bvar[id] : 0, r = s->bref[id];
+      } else {
+        const int32_t k = -1 - id;
+        a = cl->node[k].area, b = cl->Bm[k], h = cl->bhi[k], l = cl->blo[k], r = cl->bref[k];
+      }
+      for (int ch = 0; ch < 3; ch++) acc[ch] += a * b[ch];
+      hi = h > hi ? h : hi;
+      lo = l < lo ? l : lo;
+      br += a * r;
+    }
+    for (int ch = 0; ch < 3; ch++) cl->Bm[c][ch] = nd->area > 0 ? acc[ch] / nd->area : 0;
+    cl->bhi[c] = hi, cl->blo[c] = lo, cl->bref[c] = nd->area > 0 ? br / nd->area : 0;
+  }
+  cl->initial = 0;
+}
+
+/* ---------------------------------------------------------------- set-up */
+
+hr_status hr_cluster_init(hr_solver *s, hr_err *err) {
+  hr_clusters *cl = calloc(1, sizeof *cl);
+  if (!cl) return hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters");
+  s->cl = cl;
+  if (build_tree(s, cl) != HR_OK)
+    return hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters");
+  hr_cluster_pull(s); /* radiosities: the emission */
+  cl->initial = 1;
+  cl->links = malloc(sizeof *cl->links);
+  if (!cl->links) return hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters");
+  cl->links[0] = (clink){cl->root, cl->root, -1, 0, {0, 0, 0}, -1, -1, -1};
+  cl->nlinks = 1;
+  int64_t nnew = 0;
+  return hr_cluster_refine(s, s->opt.bf_start, &nnew, err);
+}
+
+int64_t hr_cluster_links(const hr_solver *s) { return s->cl ? s->cl->nlinks : 0; }
+int64_t hr_cluster_count(const hr_solver *s) { return s->cl ? s->cl->n : 0; }
+
+void hr_cluster_free(hr_clusters **pc) {
+  hr_clusters *cl = *pc;
+  if (!cl) return;
+  free(cl->node), free(cl->perm), free(cl->cum), free(cl->srad), free(cl->nsh), free(cl->rho);
+  free(cl->Bm), free(cl->bhi), free(cl->blo), free(cl->bref), free(cl->L), free(cl->links);
+  free(cl);
+  *pc = NULL;
+}

@@ -1,0 +1,43 @@
+/* cluster.h: hierarchical clustering (issue 12; Smits, Arvo & Greenberg 1994, Sillion 1995): a
+ * binary hierarchy of volume clusters above the surface roots, and cluster links between
+ * clusters and surfaces, so that linking starts from one self-link of the root cluster and costs
+ * about O(n log n) instead of O(n^2) surface pairs. Internal API; docs/design.md "Clustering".
+ *
+ * A node is an int32: >= 0 a surface root (element idx == surface id), < 0 cluster -1-c. Cluster
+ * links only ever open clusters; a link between two surfaces becomes an ordinary element link
+ * (link.c) and refines as one. */
+#ifndef HR_CLUSTER_H
+#define HR_CLUSTER_H
+
+#include "hrad.h"
+
+#include <stdint.h>
+
+typedef struct hr_solver hr_solver;
+typedef struct hr_clusters hr_clusters;
+
+/* 1 when the solver clusters: --cluster on, or auto with more surface pairs than max_links. */
+int hr_cluster_wanted(const hr_options *o, int nsurfs);
+
+/* Builds the hierarchy over the scene's surfaces and the root's self-link, and refines the
+ * cluster links at the first BF_e (element links between surfaces go to s->links). */
+hr_status hr_cluster_init(hr_solver *s, hr_err *err);
+/* One refinement pass of the cluster links at 'bf_e'; adds the new links (cluster and element)
+ * to '*nnew'. New element links make the next hr_link_sort a full one. */
+hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err);
+/* After the element gather: adds what the cluster links bring to G, Gu and Gf of the surface
+ * roots (through the clusters' incident fields). */
+void hr_cluster_gather(hr_solver *s);
+/* After push-pull: the clusters' radiosities, ranges and reference radiosities from the roots. */
+void hr_cluster_pull(hr_solver *s);
+int64_t hr_cluster_links(const hr_solver *s);
+int64_t hr_cluster_count(const hr_solver *s);
+void hr_cluster_free(hr_clusters **c);
+
+/* Order-2 real spherical harmonics of the unit vector d (9 values, Ramamoorthi & Hanrahan's
+ * ordering: 00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22). */
+void hr_sh9(const double d[3], double y[9]);
+/* The clamped-cosine convolution weights A_l for l = 0, 1, 2: pi, 2 pi / 3, pi / 4. */
+extern const double hr_sh_alpha[9];
+
+#endif

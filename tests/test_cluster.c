@@ -1,0 +1,155 @@
+/* Hierarchical clustering (cluster.c): the spherical-harmonic irradiance model against its
+ * closed forms, the closed-box furnace and total power with clustering on (walls tessellated
+ * into many triangles, so that most interactions start as cluster links), clustering on against
+ * off on the built-in scenes, and identical results for 1 and 2 threads. */
+#include "cluster.h"
+#include "testutil.h"
+
+#include <math.h>
+#include <string.h>
+
+/* The order-2 irradiance of a delta light seen along its own direction is 17/16 of the exact
+ * clamped cosine (1/4 + 1/2 + 5/16), and the model is rotation-invariant. */
+static void sh_closed_forms(void) {
+  const double dirs[4][3] = {{0, 0, 1}, {1, 0, 0}, {0, -1, 0}, {0.6, 0, 0.8}};
+  for (int k = 0; k < 4; k++) {
+    double y[9], e = 0;
+    hr_sh9(dirs[k], y);
+    for (int q = 0; q < 9; q++) e += hr_sh_alpha[q] * y[q] * y[q];
+    CHECK_REL(e, 17.0 / 16.0, 1e-5, "E(d) of a delta light from d");
+    /* perpendicular: 1/4 - 5/32 (the l = 2 term at cos 0) */
+    const double p[3] = {dirs[k][1] - dirs[k][2], dirs[k][2] - dirs[k][0], dirs[k][0] - dirs[k][1]};
+    const double pn = sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+    const double u[3] = {p[0] / pn, p[1] / pn, p[2] / pn};
+    double yu[9], e2 = 0;
+    hr_sh9(u, yu);
+    for (int q = 0; q < 9; q++) e2 += hr_sh_alpha[q] * y[q] * yu[q];
+    CHECK_REL(e2, 0.25 - 5.0 / 32.0, 1e-5, "E(n) for n perpendicular to the light");
+  }
+}
+
+/* A closed box whose six walls are each cut into 2 n^2 triangles. */
+static hr_scene *tess_box(double rho, double e, int n, double sx, double sy, double sz) {
+  hr_scene *s;
+  hr_scene_create("tessbox", &s);
+  int m = t_mat(s, "all", rho, e);
+  const hr_vec3 o = tv(0, 0, 0);
+  const hr_vec3 ax[3] = {tv(sx, 0, 0), tv(0, sy, 0), tv(0, 0, sz)};
+  for (int a = 0; a < 3; a++) {
+    const hr_vec3 u = ax[(a + 1) % 3], v = ax[(a + 2) % 3], w = ax[a];
+    for (int side = 0; side < 2; side++) {
+      const hr_vec3 base = side ? tv(o.x + w.x, o.y + w.y, o.z + w.z) : o;
+      for (int i = 0; i < n; i++)
+        for (int j = 0; j < n; j++) {
+          hr_vec3 q[4];
+          for (int c = 0; c < 4; c++) {
+            const double fu = (double)(i + (c == 1 || c == 2)) / n;
+            const double fv = (double)(j + (c >= 2)) / n;
+            q[c] = tv(base.x + fu * u.x + fv * v.x, base.y + fu * u.y + fv * v.y,
+                      base.z + fu * u.z + fv * v.z);
+          }
+          /* the normal of (q0, q1, q2) is u x v = +w: inward on side 0, outward on side 1 */
+          hr_vec3 t1[3] = {q[0], q[1], q[2]}, t2[3] = {q[0], q[2], q[3]};
+          if (side) {
+            hr_vec3 r1[3] = {q[0], q[2], q[1]}, r2[3] = {q[0], q[3], q[2]};
+            t_poly(s, m, 3, r1);
+            t_poly(s, m, 3, r2);
+          } else {
+            t_poly(s, m, 3, t1);
+            t_poly(s, m, 3, t2);
+          }
+        }
+    }
+  }
+  return s;
+}
+
+static double worst_rel(const hr_solver *sv, const hr_scene *s, double want) {
+  double worst = 0;
+  for (int p = 0; p < s->npolys; p++) {
+    double b[3];
+    hr_solver_poly_radiosity(sv, p, b);
+    for (int c = 0; c < 3; c++) {
+      const double e = fabs(b[c] - want) / want;
+      worst = e > worst ? e : worst;
+    }
+  }
+  return worst;
+}
+
+static void furnace(void) {
+  hr_scene *s = tess_box(0.5, 1, 6, 2, 3, 4);
+  hr_options o;
+  hr_options_default(&o);
+  o.cluster = HR_CLUSTER_ON;
+  o.threads = 2;
+  hr_solver *sv = t_solve(s, &o);
+  hr_stats st;
+  hr_solver_stats(sv, &st);
+  const double w = worst_rel(sv, s, 2.0);
+  printf("furnace, %d triangles, clustering on: %lld clusters, %lld cluster links of %lld; "
+         "worst %.2e\n",
+         s->npolys, (long long)st.clusters, (long long)st.cluster_links, (long long)st.links, w);
+  CHECK(st.clusters == s->nsurfs - 1, "clusters %lld", (long long)st.clusters);
+  CHECK(st.cluster_links > 0, "no cluster links");
+  CHECK(w <= 0.01, "furnace with clusters: worst relative error %.3e", w);
+  hr_solver_destroy(&sv);
+  hr_scene_destroy(&s);
+}
+
+/* The per-polygon area-weighted RMS difference of two solutions (relative, over RGB). */
+static double rms_diff(const hr_scene *s, const hr_solver *a, const hr_solver *b, double *worst) {
+  double num = 0, den = 0;
+  *worst = 0;
+  for (int p = 0; p < s->npolys; p++) {
+    double x[3], y[3], n = 0, d = 0;
+    hr_solver_poly_radiosity(a, p, x);
+    hr_solver_poly_radiosity(b, p, y);
+    for (int c = 0; c < 3; c++) n += x[c] * x[c], d += (x[c] - y[c]) * (x[c] - y[c]);
+    if (!(n > 0)) continue;
+    const double e = sqrt(d / n), A = s->poly_area[p];
+    num += A * e * e, den += A;
+    *worst = e > *worst ? e : *worst;
+  }
+  return sqrt(num / den);
+}
+
+static void on_off(const char *name, double tol) {
+  hr_scene *s;
+  hr_err err = {{0}};
+  if (hr_scene_builtin(name, &s, &err) != HR_OK) abort();
+  hr_options o;
+  hr_options_default(&o);
+  o.threads = 2;
+  o.cluster = HR_CLUSTER_OFF;
+  hr_solver *off = t_solve(s, &o);
+  o.cluster = HR_CLUSTER_ON;
+  hr_solver *on = t_solve(s, &o);
+  double worst, rms = rms_diff(s, off, on, &worst);
+  printf("%-8s clustering on against off: RMS %.3f%%, worst polygon %.2f%% (tol %.1f%%)\n", name,
+         100 * rms, 100 * worst, 100 * tol);
+  CHECK(rms <= tol, "%s: clustering changes the light by %.3f%% RMS", name, 100 * rms);
+  /* threads: bit-identical */
+  o.threads = 1;
+  hr_solver *one = t_solve(s, &o);
+  int same = 1;
+  for (int p = 0; p < s->npolys; p++) {
+    double x[3], y[3];
+    hr_solver_poly_radiosity(on, p, x);
+    hr_solver_poly_radiosity(one, p, y);
+    same &= !memcmp(x, y, sizeof x);
+  }
+  CHECK(same, "%s: clustering on 1 and 2 threads differs", name);
+  hr_solver_destroy(&one);
+  hr_solver_destroy(&on);
+  hr_solver_destroy(&off);
+  hr_scene_destroy(&s);
+}
+
+int main(void) {
+  sh_closed_forms();
+  furnace();
+  on_off("cornell", 0.01);
+  on_off("room", 0.01);
+  return t_done("test_cluster");
+}
