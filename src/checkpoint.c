@@ -12,6 +12,7 @@
  * of Figure 3, the elements, the links with their candidate lists, and a u64 checksum of all that
  * precedes it. A file is written to PATH.tmp and renamed into place, so a kill leaves the
  * previous checkpoint intact. */
+#include "cluster.h"
 #include "mpi/dist.h"
 #include "solver_impl.h"
 #include "vec.h"
@@ -22,7 +23,7 @@
 #include <string.h>
 
 #define MAGIC "HRADCKP1"
-#define VERSION 4u
+#define VERSION 5u
 
 /* ---------------------------------------------------------------- hashing */
 
@@ -52,10 +53,12 @@ static uint64_t scene_hash(const hr_scene *sc) {
   return h;
 }
 
-/* The options the solution depends on (not threads, max_iters or max_links). */
-static uint64_t options_hash(const hr_options *o) {
+/* The options the solution depends on (not threads or max_iters; max_links and cluster only
+ * through whether the solver clusters). */
+static uint64_t options_hash(const hr_options *o, int nsurfs) {
   const double d[] = {o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max};
-  const int64_t n[] = {o->relax, o->relax_links, o->rays, (int64_t)o->seed};
+  const int64_t n[] = {o->relax, o->relax_links, o->rays, (int64_t)o->seed,
+                       hr_cluster_wanted(o, nsurfs)};
   return hash_bytes(hash_bytes(0x0b7, d, sizeof d), n, sizeof n);
 }
 
@@ -185,8 +188,6 @@ static int pack_elements(const hr_solver *s, char **out, int64_t *bytes) {
 }
 
 hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err) {
-  if (hr_solver_clustered(s))
-    return hr_err_set(err, HR_ERR_INVALID, "%s: checkpoints do not hold cluster links yet", path);
   if (!s->started)
     return hr_err_set(err, HR_ERR_INVALID, "%s: nothing to save before the first iteration", path);
   /* Elements and links: this rank's own, and in a distributed run everybody's on rank 0, which
@@ -212,6 +213,13 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
     memcpy(&r, lb + o, sizeof r);
     o += (int64_t)sizeof r + 4 * (int64_t)(r.ncand > 0 ? r.ncand : 0);
   }
+  uint64_t *cids = NULL;
+  float *cvals = NULL;
+  int64_t ncl = 0;
+  if (hr_cluster_export(s, &cids, &cvals, &ncl) != HR_OK) {
+    free(eb), free(lb);
+    return hr_err_set(err, HR_ERR_NOMEM, "out of memory writing %s", path);
+  }
   uint64_t(*lk)[3] = malloc((size_t)(nl > 0 ? nl : 1) * sizeof *lk);
   char tmp[4200];
   snprintf(tmp, sizeof tmp, "%s.tmp", path);
@@ -219,6 +227,7 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
   if (!lk) {
     free(eb);
     free(lb);
+    free(cids), free(cvals);
     return hr_err_set(err, HR_ERR_NOMEM, "out of memory writing %s", path);
   }
   for (int64_t o = 0, i = 0; o < lbytes; i++) {
@@ -233,10 +242,11 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
     free(eb);
     free(lk);
     free(lb);
+    free(cids), free(cvals);
     return hr_err_set(err, HR_ERR_IO, "%s: cannot write: %s", tmp, strerror(errno));
   }
   const uint32_t version = VERSION;
-  const uint64_t hs = scene_hash(s->scene), ho = options_hash(&s->opt);
+  const uint64_t hs = scene_hash(s->scene), ho = options_hash(&s->opt, s->scene->nsurfs);
   put(&w, MAGIC, 8);
   put(&w, &version, sizeof version);
   put(&w, &hs, sizeof hs);
@@ -260,6 +270,13 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
     put(&w, &r, sizeof r);
     if (r.ncand > 0) put(&w, lb + lk[i][2] + sizeof r, (size_t)r.ncand * sizeof(int32_t));
   }
+  /* cluster links, in the solver's order (its gather sums in that order) */
+  put(&w, &ncl, sizeof ncl);
+  if (ncl > 0) {
+    put(&w, cids, (size_t)ncl * 2 * sizeof *cids);
+    put(&w, cvals, (size_t)ncl * 8 * sizeof *cvals);
+  }
+  free(cids), free(cvals);
   const uint64_t sum = w.h;
   put(&w, &sum, sizeof sum);
   free(eb);
@@ -439,11 +456,37 @@ static int read_links(hr_solver *s, reader *r, const char *path, hr_err *err) {
   return 1;
 }
 
+/* The cluster links: none unless the solver clusters, whose hierarchy is built here. */
+static int read_clusters(hr_solver *s, reader *r, const char *path, hr_err *err) {
+  int64_t n;
+  get(r, &n, sizeof n);
+  const int64_t rec = 2 * (int64_t)sizeof(uint64_t) + 8 * (int64_t)sizeof(float);
+  if (r->bad || n < 0 || n > (int64_t)(r->end - r->p) / rec || (n > 0) != hr_solver_clustered(s)) {
+    hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (cluster link count)", path);
+    return 0;
+  }
+  if (!hr_solver_clustered(s)) return 1;
+  uint64_t *ids = malloc((size_t)n * 2 * sizeof *ids);
+  float *vals = malloc((size_t)n * 8 * sizeof *vals);
+  if (!ids || !vals) {
+    free(ids), free(vals);
+    return -1;
+  }
+  get(r, ids, (size_t)n * 2 * sizeof *ids);
+  get(r, vals, (size_t)n * 8 * sizeof *vals);
+  hr_status st = r->bad ? HR_ERR_PARSE : hr_cluster_import(s, ids, vals, n);
+  free(ids), free(vals);
+  if (st == HR_ERR_NOMEM) return -1;
+  if (st != HR_OK) {
+    hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (cluster links)", path);
+    return 0;
+  }
+  return 1;
+}
+
 static hr_status resume(hr_solver *s, const char *path, hr_err *err);
 
 hr_status hr_solver_resume(hr_solver *s, const char *path, hr_err *err) {
-  if (hr_solver_clustered(s))
-    return hr_err_set(err, HR_ERR_INVALID, "%s: checkpoints do not hold cluster links yet", path);
   hr_status st = resume(s, path, err);
   if (!s->dist) return st;
   /* every rank read the same file: only a local failure (memory) can differ */
@@ -484,10 +527,10 @@ static hr_status resume(hr_solver *s, const char *path, hr_err *err) {
   } else if (hs != scene_hash(s->scene)) {
     st = hr_err_set(err, HR_ERR_INVALID, "%s: the checkpoint was written for another scene",
                     path);
-  } else if (ho != options_hash(&s->opt)) {
+  } else if (ho != options_hash(&s->opt, s->scene->nsurfs)) {
     st = hr_err_set(err, HR_ERR_INVALID,
                     "%s: the checkpoint was written with other solver options (--bf-low, "
-                    "--area-min, --rays, --seed, ...): resume with the same ones",
+                    "--area-min, --rays, --seed, --cluster, ...): resume with the same ones",
                     path);
   }
   progress pr;
@@ -496,6 +539,7 @@ static hr_status resume(hr_solver *s, const char *path, hr_err *err) {
     get(&r, &pr, sizeof pr);
     int ok = r.bad ? 0 : read_elements(s, &r, path, err);
     if (ok > 0) ok = read_links(s, &r, path, err);
+    if (ok > 0) ok = read_clusters(s, &r, path, err);
     if (ok < 0)
       st = hr_err_set(err, HR_ERR_NOMEM, "%s: out of memory", path);
     else if (ok == 0)

@@ -842,6 +842,54 @@ hr_status hr_cluster_init(hr_solver *s, hr_err *err) {
   return hr_cluster_refine(s, s->opt.bf_start, &nnew, err);
 }
 
+hr_status hr_cluster_export(const hr_solver *s, uint64_t **ids, float **vals, int64_t *n) {
+  const hr_clusters *cl = s->cl;
+  *ids = NULL, *vals = NULL, *n = cl ? cl->nlinks : 0;
+  if (*n == 0) return HR_OK;
+  *ids = malloc((size_t)*n * 2 * sizeof **ids);
+  *vals = malloc((size_t)*n * 8 * sizeof **vals);
+  if (!*ids || !*vals) {
+    free(*ids), free(*vals);
+    *ids = NULL, *vals = NULL;
+    return HR_ERR_NOMEM;
+  }
+  for (int64_t i = 0; i < *n; i++) {
+    const clink *l = &cl->links[i];
+    (*ids)[2 * i] = node_gid(s, l->r), (*ids)[2 * i + 1] = node_gid(s, l->s);
+    const float v[8] = {l->F, l->kf, l->d[0], l->d[1], l->d[2], l->fb, l->kv, l->fu2};
+    memcpy(*vals + 8 * i, v, sizeof v);
+  }
+  return HR_OK;
+}
+
+/* The node of id g (node_gid's inverse), or INT32_MIN. */
+static int32_t node_of(const hr_solver *s, uint64_t g) {
+  if (g >> 63) {
+    const uint64_t c = g & ~(UINT64_C(1) << 63);
+    return c < (uint64_t)s->cl->n ? -1 - (int32_t)c : INT32_MIN;
+  }
+  const int32_t e = hr_elem_find(s, g);
+  return e >= 0 ? e : INT32_MIN;
+}
+
+hr_status hr_cluster_import(hr_solver *s, const uint64_t *ids, const float *vals, int64_t n) {
+  hr_clusters *cl = calloc(1, sizeof *cl);
+  if (!cl) return HR_ERR_NOMEM;
+  s->cl = cl;
+  if (build_tree(s, cl) != HR_OK) return HR_ERR_NOMEM;
+  cl->links = malloc((size_t)(n > 0 ? n : 1) * sizeof *cl->links);
+  if (!cl->links) return HR_ERR_NOMEM;
+  for (int64_t i = 0; i < n; i++) {
+    const int32_t r = node_of(s, ids[2 * i]), sn = node_of(s, ids[2 * i + 1]);
+    if (r == INT32_MIN || sn == INT32_MIN || (r >= 0 && sn >= 0)) return HR_ERR_PARSE;
+    const float *v = vals + 8 * i;
+    cl->links[i] = (clink){r, sn, v[0], v[1], {v[2], v[3], v[4]}, v[5], v[6], v[7]};
+  }
+  cl->nlinks = n;
+  hr_cluster_pull(s);
+  return HR_OK;
+}
+
 int64_t hr_cluster_links(const hr_solver *s) { return s->cl ? s->cl->nlinks : 0; }
 int64_t hr_cluster_count(const hr_solver *s) { return s->cl ? s->cl->n : 0; }
 

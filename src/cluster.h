@@ -30,6 +30,12 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
 void hr_cluster_gather(hr_solver *s);
 /* After push-pull: the clusters' radiosities, ranges and reference radiosities from the roots. */
 void hr_cluster_pull(hr_solver *s);
+/* Checkpoints: the cluster links in their order, each as two node ids (an element's gid, or
+ * 1 << 63 | cluster) and eight floats; hr_cluster_export allocates both arrays (NULL when
+ * there are none). hr_cluster_import builds the hierarchy of a resumed solver and takes the
+ * links (elements must exist already); HR_ERR_PARSE for an id that names no node. */
+hr_status hr_cluster_export(const hr_solver *s, uint64_t **ids, float **vals, int64_t *n);
+hr_status hr_cluster_import(hr_solver *s, const uint64_t *ids, const float *vals, int64_t n);
 int64_t hr_cluster_links(const hr_solver *s);
 int64_t hr_cluster_count(const hr_solver *s);
 void hr_cluster_free(hr_clusters **c);

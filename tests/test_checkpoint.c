@@ -18,11 +18,14 @@ static hr_scene *scene(double light) {
   return s;
 }
 
+static int g_cluster = HR_CLUSTER_OFF; /* the runs of resume_identical */
+
 static hr_options opts(int threads) {
   hr_options o;
   hr_options_default(&o);
   o.bf_low = 3e-3;
   o.threads = threads;
+  o.cluster = g_cluster;
   return o;
 }
 
@@ -60,7 +63,8 @@ static int same(const result *a, const result *b) {
 }
 
 static void resume_identical(void) {
-  printf("stop after iteration k, resume on another thread count: bit-identical\n");
+  printf("stop after iteration k, resume on another thread count: bit-identical%s\n",
+         g_cluster == HR_CLUSTER_ON ? " (clustering on)" : "");
   hr_scene *s = scene(17);
   hr_options o1 = opts(1), o2 = opts(2);
   result full;
@@ -119,6 +123,14 @@ static void refused(void) {
   printf("  other options: %s\n", err.msg);
   CHECK(st == HR_ERR_INVALID && strstr(err.msg, "options"), "status %d: %s", st, err.msg);
   hr_solver_destroy(&sv);
+  /* with clustering where the checkpoint had none */
+  o2 = o;
+  o2.cluster = HR_CLUSTER_ON;
+  hr_solver_create(s, &o2, &sv, &err);
+  st = hr_solver_resume(sv, path, &err);
+  printf("  clustering on: %s\n", err.msg);
+  CHECK(st == HR_ERR_INVALID && strstr(err.msg, "options"), "status %d: %s", st, err.msg);
+  hr_solver_destroy(&sv);
   /* truncated, and one flipped byte */
   FILE *f = fopen(path, "rb");
   fseek(f, 0, SEEK_END);
@@ -145,6 +157,9 @@ static void refused(void) {
 int main(void) {
   snprintf(path, sizeof path, "/tmp/hrad_test_checkpoint_%ld.ckpt", (long)getpid());
   resume_identical();
+  g_cluster = HR_CLUSTER_ON; /* the cluster links and their order go into the file too */
+  resume_identical();
+  g_cluster = HR_CLUSTER_OFF;
   refused();
   unlink(path);
   return t_done("test_checkpoint");

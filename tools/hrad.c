@@ -2089,10 +2089,6 @@ int main(int argc, char **argv) {
   else hr_scene_auto_camera(scene, &c.cam);
   hr_solver *s = NULL;
   check(hr_solver_create(scene, &c.opt, &s, &err), &err);
-  if ((c.ckpt || c.resume) && hr_solver_clustered(s))
-    fail("%s: --checkpoint and --resume do not work with clustering yet (--cluster off, or a "
-        "scene under --max-pairs surface pairs)",
-        c.scene_arg);
   if (hr_dist_size(g_dist) > 1) { /* --balance random:N scatters elements (N = 0 acts as 1) */
     const uint64_t scatter = c.balance_random ? (c.balance_seed ? c.balance_seed : 1) : 0;
     check(hr_solver_set_dist(s, g_dist, NULL, scatter, &err), &err);
