@@ -101,7 +101,6 @@ int hr_cluster_wanted(const hr_options *o, int nsurfs) {
 /* ---------------------------------------------------------------- the hierarchy */
 
 typedef struct builder {
-  const hr_scene *sc;
   hr_clusters *cl;
   const hr_vec3 *cen; /* surface centroids */
   int axis;
@@ -236,7 +235,7 @@ static hr_status build_tree(hr_solver *s, hr_clusters *cl) {
     }
     cl->srad[i] = r;
   }
-  builder b = {sc, cl, cen, 0};
+  builder b = {cl, cen, 0};
   cl->n = 0;
   cl->root = n >= 2 ? -1 - build(&b, 0, n) : 0;
   free(cen);
@@ -333,6 +332,9 @@ static hr_vec3 node_point(const hr_solver *s, int32_t id, const double u[3], hr_
   }
   return v3_lerp(v3_lerp(p[0], p[1], u[1]), v3_lerp(p[3], p[2], u[1]), u[2]);
 }
+
+/* A new link r <- sn: nothing estimated or decided yet. */
+static clink fresh(int32_t r, int32_t sn) { return (clink){r, sn, -1, 0, {0, 0, 0}, -1, -1, -1}; }
 
 /* ---------------------------------------------------------------- link estimate */
 
@@ -564,33 +566,29 @@ static int decide(const hr_solver *s, clink *l, double bf_e) {
   const double b = mean * l->kv + range;
   if (l->r < 0 && !recv_whole(s, l)) lim = 0;
   if (rho * l->fb * b <= lim) return rho * l->fb * b <= 0.25 * lim ? C_WEAK : C_KEEP;
+  hr_vec3 cr, cs;
+  double rr, rs, ar, as;
+  node_sphere(s, l->r, &cr, &rr, &ar);
+  node_sphere(s, l->s, &cs, &rs, &as);
   /* Near clusters: the bound says nothing (1 where the spheres meet), so the unoccluded form
    * factor from the link's own point pairs, doubled for its noise, stands in for it. */
   if (l->fu2 < 0) {
-    hr_vec3 cs;
-    double rs, as;
-    node_sphere(s, l->s, &cs, &rs, &as);
     const double fu = unoccluded(s, l, as);
     l->fu2 = fu >= 0 ? (float)(2 * fu) : 2; /* 2: no estimate (never below fb <= 1) */
   }
   if (l->fu2 >= 0 && l->fu2 < l->fb && rho * l->fu2 * b <= lim)
     return rho * l->fu2 * b <= 0.25 * lim ? C_WEAK : C_KEEP;
-  double rr, rs, a;
-  hr_vec3 c;
-  node_sphere(s, l->r, &c, &rr, &a);
-  node_sphere(s, l->s, &c, &rs, &a);
   /* the larger side opens (a cluster always can; an element above A_e) */
   const int okr = node_splittable(s, l->r), oks = node_splittable(s, l->s);
   if (okr && (!oks || rr >= rs)) return C_SPLIT_R;
-  if (oks) return C_SPLIT_S;
-  return C_KEEP; /* an element at A_e and ... (cannot happen: one side is a cluster) */
+  assert(oks); /* one side is a cluster */
+  return C_SPLIT_S;
 }
 
 /* The children of link l under decision dec into kids (at most 4); returns their count.
  * Elements to split are subdivided already. */
 static int split(const hr_solver *s, const clink *l, int dec, clink *kids) {
   const hr_clusters *cl = s->cl;
-  const clink z = {0, 0, -1, 0, {0, 0, 0}, -1, -1, -1};
   int32_t ch[4];
   const int32_t id = dec == C_SPLIT_R ? l->r : l->s;
   int nc;
@@ -603,17 +601,10 @@ static int split(const hr_solver *s, const clink *l, int dec, clink *kids) {
   int n = 0;
   for (int a = 0; a < nc; a++) {
     if (l->r == l->s) { /* a cluster's self-link: every ordered pair of its children */
-      for (int b = 0; b < nc; b++) {
-        kids[n] = z;
-        kids[n].r = ch[a], kids[n].s = ch[b];
-        n++;
-      }
-      continue;
+      for (int b = 0; b < nc; b++) kids[n++] = fresh(ch[a], ch[b]);
+    } else {
+      kids[n++] = dec == C_SPLIT_R ? fresh(ch[a], l->s) : fresh(l->r, ch[a]);
     }
-    kids[n] = z;
-    kids[n].r = dec == C_SPLIT_R ? ch[a] : l->r;
-    kids[n].s = dec == C_SPLIT_R ? l->s : ch[a];
-    n++;
   }
   return n;
 }
@@ -638,10 +629,9 @@ static hr_status append_links(hr_solver *s, const hr_link *add, const uint8_t *o
 }
 
 /* How many children split() makes of link l under decision dec. */
-static int kid_count(const hr_solver *s, const clink *l, int dec) {
+static int kid_count(const clink *l, int dec) {
   if (dec != C_SPLIT_R && dec != C_SPLIT_S) return 0;
   const int32_t id = dec == C_SPLIT_R ? l->r : l->s;
-  (void)s;
   const int nc = id < 0 ? 2 : 4;
   return l->r == l->s ? nc * nc : nc;
 }
@@ -676,7 +666,7 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
         dec[i] = (uint8_t)d;
         cnt[c + 1][0] += d == C_KEEP || d == C_WEAK;
         cnt[c + 1][1] += d == C_ELEM;
-        cnt[c + 1][2] += kid_count(s, &cur[i], d);
+        cnt[c + 1][2] += kid_count(&cur[i], d);
       }
     }
     for (int64_t c = 0; c < nch; c++)
@@ -827,17 +817,23 @@ void hr_cluster_pull(hr_solver *s) {
 
 /* ---------------------------------------------------------------- set-up */
 
-hr_status hr_cluster_init(hr_solver *s, hr_err *err) {
+/* s->cl with its hierarchy and room for n links (none yet). */
+static hr_status create(hr_solver *s, int64_t n) {
   hr_clusters *cl = calloc(1, sizeof *cl);
-  if (!cl) return hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters");
+  if (!cl) return HR_ERR_NOMEM;
   s->cl = cl;
-  if (build_tree(s, cl) != HR_OK)
+  if (build_tree(s, cl) != HR_OK) return HR_ERR_NOMEM;
+  cl->links = malloc((size_t)(n > 0 ? n : 1) * sizeof *cl->links);
+  return cl->links ? HR_OK : HR_ERR_NOMEM;
+}
+
+hr_status hr_cluster_init(hr_solver *s, hr_err *err) {
+  if (create(s, 1) != HR_OK)
     return hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters");
+  hr_clusters *cl = s->cl;
   hr_cluster_pull(s); /* radiosities: the emission */
   cl->initial = 1;
-  cl->links = malloc(sizeof *cl->links);
-  if (!cl->links) return hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters");
-  cl->links[0] = (clink){cl->root, cl->root, -1, 0, {0, 0, 0}, -1, -1, -1};
+  cl->links[0] = fresh(cl->root, cl->root);
   cl->nlinks = 1;
   int64_t nnew = 0;
   return hr_cluster_refine(s, s->opt.bf_start, &nnew, err);
@@ -874,12 +870,9 @@ static int32_t node_of(const hr_solver *s, uint64_t g) {
 }
 
 hr_status hr_cluster_import(hr_solver *s, const uint64_t *ids, const float *vals, int64_t n) {
-  hr_clusters *cl = calloc(1, sizeof *cl);
-  if (!cl) return HR_ERR_NOMEM;
-  s->cl = cl;
-  if (build_tree(s, cl) != HR_OK) return HR_ERR_NOMEM;
-  cl->links = malloc((size_t)(n > 0 ? n : 1) * sizeof *cl->links);
-  if (!cl->links) return HR_ERR_NOMEM;
+  hr_status st = create(s, n);
+  if (st != HR_OK) return st;
+  hr_clusters *cl = s->cl;
   for (int64_t i = 0; i < n; i++) {
     const int32_t r = node_of(s, ids[2 * i]), sn = node_of(s, ids[2 * i + 1]);
     if (r == INT32_MIN || sn == INT32_MIN || (r >= 0 && sn >= 0)) return HR_ERR_PARSE;

@@ -15,6 +15,7 @@
 #include "solver_impl.h"
 #include "vec.h"
 
+#include <assert.h>
 #include <omp.h>
 #include <stdlib.h>
 #include <math.h>
@@ -220,6 +221,20 @@ static int row_push(row *rw, hr_link lij, hr_link lji) {
   return 1;
 }
 
+/* A link r <- j before any refinement, from the pair's decision and estimated visible
+ * fractions h and he: its form factors, the oracle's measures and source shares, no candidate
+ * list yet. */
+static hr_link first_link(int32_t r, int32_t j, const hr_ff_elem *gr, const hr_ff_elem *gj,
+                          double h, double he) {
+  double sp;
+  const double f = hr_ff_pair(gr, gj, 0, &sp);
+  hr_link l = {.r = r, .s = j, .F = (float)(f * he), .Fu = (float)f,
+               .dF = (float)link_df(gr, gj, f, sp, h), .dS = (float)link_ds(gr, gj, f, h),
+               .cand_off = 0, .ncand = NO_LIST};
+  source_shares(gr, gj, h == 1, l.w);
+  return l;
+}
+
 /* Computes H for the pending pairs of row i (batched where every sample counts, the rest one
  * by one), appends the links of the visible ones in pair order and empties 'pd'. Returns 0 when
  * out of memory.
@@ -253,17 +268,8 @@ static int init_flush(const hr_solver *s, int i, const hr_ff_elem *gi, pending *
     const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h[q], blk, &rw->rays);
     /* The form factors only now: most facing pairs of a large scene are hidden (museum: 8.2 M
      * of 9.2 M), and their quadrature would be wasted. */
-    double sij, sji;
-    const double fij = hr_ff_pair(gi, gj, 0, &sij), fji = hr_ff_pair(gj, gi, 0, &sji);
-    hr_link lij = {.r = i, .s = j, .F = (float)(fij * he), .Fu = (float)fij,
-                   .dF = (float)link_df(gi, gj, fij, sij, h[q]),
-                   .dS = (float)link_ds(gi, gj, fij, h[q]), .cand_off = 0, .ncand = NO_LIST};
-    hr_link lji = {.r = j, .s = i, .F = (float)(fji * he), .Fu = (float)fji,
-                   .dF = (float)link_df(gj, gi, fji, sji, h[q]),
-                   .dS = (float)link_ds(gj, gi, fji, h[q]), .cand_off = 0, .ncand = NO_LIST};
-    source_shares(gi, gj, h[q] == 1, lij.w);
-    source_shares(gj, gi, h[q] == 1, lji.w);
-    if (!row_push(rw, lij, lji)) return 0;
+    if (!row_push(rw, first_link(i, j, gi, gj, h[q], he), first_link(j, i, gj, gi, h[q], he)))
+      return 0;
   }
   pd->n = pd->segs = 0;
   return 1;
@@ -306,12 +312,7 @@ int hr_link_pair(const hr_solver *s, int32_t i, int32_t j, hr_link *out, int64_t
   const double h = hr_vf_pair(&s->vf, ei, ej, NULL, -1, pair_rays(s), STREAM_DECIDE, NULL, rays);
   if (h == 0) return 0;
   const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h, NULL, rays);
-  double sp;
-  const double f = hr_ff_pair(&gi, &gj, 0, &sp);
-  *out = (hr_link){.r = i, .s = j, .F = (float)(f * he), .Fu = (float)f,
-                   .dF = (float)link_df(&gi, &gj, f, sp, h), .dS = (float)link_ds(&gi, &gj, f, h),
-                   .cand_off = 0, .ncand = NO_LIST};
-  source_shares(&gi, &gj, h == 1, out->w);
+  *out = first_link(i, j, &gi, &gj, h, he);
   return 1;
 }
 
@@ -351,9 +352,7 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
   int n = sc->nsurfs;
   double pairs = 0.5 * (double)n * (double)(n - 1);
   if (hr_cluster_wanted(&s->opt, n)) {
-    if (s->dist)
-      return hr_err_set(err, HR_ERR_INVALID,
-                        "clustering (--cluster) does not run over several processes yet");
+    assert(!s->dist); /* hr_solver_set_dist refuses clustering */
     hr_status st = hr_cluster_init(s, err);
     s->initial_links = s->nlinks + hr_cluster_links(s);
     return st;
