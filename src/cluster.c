@@ -278,7 +278,8 @@ static void node_sphere(const hr_solver *s, int32_t id, hr_vec3 *c, double *r, d
 static const double *node_b(const hr_solver *s, int32_t id, double *mean, double *range) {
   const hr_clusters *cl = s->cl;
   if (id >= 0) {
-    *mean = max3(s->Bs[id]), *range = s->bvar[id];
+    /* a leaf's bvar (<= 0) is its own variation (pushpull.c); clusters read leaf means */
+    *mean = max3(s->Bs[id]), *range = s->bvar[id] > 0 ? s->bvar[id] : 0;
     return s->Bs[id];
   }
   const int32_t c = -1 - id;
@@ -798,8 +799,8 @@ void hr_cluster_pull(hr_solver *s) {
       const double *b;
       if (id >= 0) {
         a = s->el[id].area, b = s->Bs[id];
-        const double m = max3(b);
-        h = m + s->bvar[id], l = m - s->bvar[id] > 0 ? m - s->bvar[id] : 0, r = s->bref[id];
+        const double m = max3(b), v = s->bvar[id] > 0 ? s->bvar[id] : 0; /* leaf: 0 */
+        h = m + v, l = m - v > 0 ? m - v : 0, r = s->bref[id];
       } else {
         const int32_t k = -1 - id;
         a = cl->node[k].area, b = cl->Bm[k], h = cl->bhi[k], l = cl->blo[k], r = cl->bref[k];

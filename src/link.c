@@ -85,6 +85,20 @@ static double ff_bound(const hr_ff_elem *r, const hr_ff_elem *j) {
   return j->area / (M_PI * v3_dot(d, d) + j->area);
 }
 
+/* Upper bound of the form factor from r to j, cosines bounded by 1 and the distance by the gap
+ * between the bounding spheres of the two elements (1 where they overlap). */
+static double ff_bound_near(const hr_ff_elem *r, const hr_ff_elem *j) {
+  hr_vec3 cr = {0, 0, 0}, cj = {0, 0, 0};
+  for (int k = 0; k < r->nv; k++) cr = v3_add(cr, r->p[k]);
+  for (int k = 0; k < j->nv; k++) cj = v3_add(cj, j->p[k]);
+  cr = v3_scale(cr, 1.0 / r->nv), cj = v3_scale(cj, 1.0 / j->nv);
+  double rr = 0, rj = 0;
+  for (int k = 0; k < r->nv; k++) rr = fmax(rr, v3_len(v3_sub(r->p[k], cr)));
+  for (int k = 0; k < j->nv; k++) rj = fmax(rj, v3_len(v3_sub(j->p[k], cj)));
+  const double d = fmax(0, v3_len(v3_sub(cj, cr)) - rr - rj);
+  return j->area / (M_PI * d * d + j->area);
+}
+
 /* The oracle's receiver measure of a link (fu: unoccluded form factor, spread: its variation
  * over the receiver, hd: visible fraction from the decision samples):
  *  - the spread of the point form factor over the receiver;
@@ -120,11 +134,25 @@ static double link_ds(const hr_ff_elem *r, const hr_ff_elem *j, double fu, doubl
  * Cornell box: parts of the floor's penumbra 5-18% too bright). */
 enum { STREAM_ESTIMATE = 0, STREAM_DECIDE = 1 };
 
+/* The form factor from the smaller of elements r and j to the larger, from fu (r to j). */
+static double f_small(const hr_ff_elem *r, const hr_ff_elem *j, double fu) {
+  return r->area <= j->area ? fu : fu * r->area / j->area;
+}
+
+/* The visible fraction of pair (a, b) from k samples of 'stream': with rays drawn by the kernel
+ * where they land often enough (fs, the form factor from the smaller element to the larger, at
+ * least HR_VF_LAND_MIN: near pairs), else weighted by it (visfrac.h). */
+static double pair_h(const hr_solver *s, hr_vf_elem a, hr_vf_elem b, const int32_t *cand,
+                     int ncand, int k, int stream, double fs, hr_blockers *blk, int64_t *rays) {
+  if (fs >= HR_VF_LAND_MIN) return hr_vf_pair_land(&s->vf, a, b, cand, ncand, k, stream, blk, rays);
+  return hr_vf_pair(&s->vf, a, b, cand, ncand, k, stream, blk, rays);
+}
+
 /* The estimate set's visible fraction when the decision set gave 'hd' (k rays). */
 static double estimate_h(const hr_solver *s, hr_vf_elem a, hr_vf_elem b, const int32_t *cand,
-                         int ncand, int k, double hd, hr_blockers *blk, int64_t *rays) {
+                         int ncand, int k, double hd, double fs, hr_blockers *blk, int64_t *rays) {
   if (ncand == 0) return hd;
-  return hr_vf_pair(&s->vf, a, b, cand, ncand, k, STREAM_ESTIMATE, blk, rays);
+  return pair_h(s, a, b, cand, ncand, k, STREAM_ESTIMATE, fs, blk, rays);
 }
 
 /* Source shares (hr_link.w): how the light of a link from source j into receiver r divides
@@ -149,8 +177,9 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
   const int k = pair_rays(s), kd = decide_rays(s), nc = l->ncand;
   if (fu > 0 || (elem_in_front(&gr, &gj) && elem_in_front(&gj, &gr))) {
     const hr_vf_elem a = vf_elem(s, l->r, &gr), b = vf_elem(s, l->s, &gj);
-    hd = hr_vf_pair(&s->vf, a, b, pool + l->cand_off, nc, kd, STREAM_DECIDE, NULL, rays);
-    he = estimate_h(s, a, b, pool + l->cand_off, nc, k, hd, NULL, rays);
+    const double fs = f_small(&gr, &gj, fu);
+    hd = pair_h(s, a, b, pool + l->cand_off, nc, kd, STREAM_DECIDE, fs, NULL, rays);
+    he = estimate_h(s, a, b, pool + l->cand_off, nc, k, hd, fs, NULL, rays);
   }
   source_shares(&gr, &gj, nc == 0 || hd == 1, l->w);
   l->Fu = (float)fu;
@@ -159,13 +188,42 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
   l->dS = (float)link_ds(&gr, &gj, fu, hd);
 }
 
+/* Fine sources. A receiver that cannot be split (at most A_e) close to a larger leaf sees the
+ * part of that leaf next to it, whose radiosity may differ from the leaf's mean: in `office` a
+ * desk leg 4 cm from a wall sees the wall in the shadow of the leg and of the desk top, and a book
+ * 4 cm from the bookshelf's side the strip of the side next to it; with the leaf's mean they
+ * came out 40-85% too bright. The link then measures the leaf's own variation (a leaf's bvar:
+ * the spread of the light its links bring, pushpull.c) with its source term and may split it
+ * below A_e: 1 for element j (the link's source or one of its children) when the receiver is at
+ * most A_e, the link is near (the form factor from the smaller element to the larger at least
+ * HR_VF_LAND_MIN) and j is larger than a quarter of the receiver and than A_e / 16. The links
+ * into a split leaf then refine to its children as any links do (hr_elem_splittable). */
+static int fine_source(const hr_solver *s, const hr_link *l, int32_t j) {
+  const hr_elem *r = &s->el[l->r], *e = &s->el[j];
+  if (r->parent >= 0 || r->area > s->area_min || e->area <= 0.25 * r->area ||
+      e->area <= s->area_min / 16 || e->depth >= HR_GID_DEPTH)
+    return 0;
+  const double as = s->el[l->s].area;
+  return l->Fu * r->area / (r->area < as ? r->area : as) >= HR_VF_LAND_MIN;
+}
+
+/* The variation of element j's radiosity that link l does not see: its leaves' spread, or, for a
+ * leaf, its own variation where it is a fine source (stored negated, pushpull.c). */
+static double var_of(const hr_solver *s, const hr_link *l, int32_t j) {
+  const double v = s->bvar[j];
+  return v >= 0 ? v : fine_source(s, l, j) ? -v : 0;
+}
+
 /* The variation of the source's radiosity that a link does not see: within its children where
  * it gathers them by shares, else within the source. */
 static double source_var(const hr_solver *s, const hr_link *l) {
   const int32_t c = s->el[l->s].child;
-  if (c < 0 || !(l->w[0] >= 0)) return s->bvar[l->s];
+  if (c < 0 || !(l->w[0] >= 0)) return var_of(s, l, l->s);
   double v = 0;
-  for (int k = 0; k < 4; k++) v = s->bvar[c + k] > v ? s->bvar[c + k] : v;
+  for (int k = 0; k < 4; k++) {
+    const double x = var_of(s, l, c + k);
+    v = x > v ? x : v;
+  }
   return v;
 }
 
@@ -201,6 +259,7 @@ typedef struct row {
 typedef struct pending {
   int n, segs;
   int j[HR_VF_BATCH_PAIRS], k[HR_VF_BATCH_PAIRS];
+  double fs[HR_VF_BATCH_PAIRS]; /* f_small of near pairs (pair_h), else 0 */
   hr_ff_elem g[HR_VF_BATCH_PAIRS];
 } pending;
 
@@ -235,6 +294,56 @@ static hr_link first_link(int32_t r, int32_t j, const hr_ff_elem *gr, const hr_f
   return l;
 }
 
+/* Initial pairs all of whose k decision samples are blocked. That leaves a visible fraction
+ * below about 3/k (95%), and a pair dropped here loses its light for good: in `office` a book's
+ * side 6 cm from the bookshelf's side had no link to it (its 16 samples on the 1.9 m tall side
+ * all fell above the shelf over the book or on the plinth), and 25-86% of what the faces inside
+ * the shelf see had no link. Where the light that may be lost, the form factor times 3/n times
+ * the source's emission over the radiosity unit (1 for surfaces that do not emit), could exceed
+ * BF_low of what the receiver gets, more samples are drawn, doubling, each round with samples
+ * of its own, until one sees through or the bound falls below BF_low (at most RECHECK_MAX). A
+ * cheap bound of the form factor (cosines 1) settles most hidden pairs of a large scene without
+ * quadrature. */
+#define RECHECK_MAX 4096
+enum { STREAM_RECHECK = 2 }; /* and up: one stream per round */
+
+/* What the light from surface 'j' weighs against the radiosity unit: its emission (largest
+ * channel) over the unit, at least 1. */
+static double source_weight(const hr_solver *s, int j) {
+  const double *e = s->scene->mats[s->scene->surfs[j].material].emit;
+  double m = e[0] > e[1] ? e[0] : e[1];
+  m = (m > e[2] ? m : e[2]) / s->unit;
+  return m > 1 ? m : 1;
+}
+
+/* Samples still needed for the pair (i, j) with potential 'pot' (largest form factor times
+ * source weight) after n blocked samples: 0 once 3 pot / n <= BF_low. */
+static int recheck_more(const hr_solver *s, double pot, int n) {
+  return n < RECHECK_MAX && 3 * pot > s->opt.bf_low * n;
+}
+
+/* The decision H of an initial pair whose k samples were all blocked: 0 when it stays hidden,
+ * else the visible fraction of the round that saw through, with that round's sample count in
+ * '*kout' (the estimate then takes as many). */
+static double recheck(const hr_solver *s, hr_vf_elem ei, hr_vf_elem ej, int k, double fs,
+                      hr_blockers *blk, int64_t *rays, int *kout) {
+  const double wi = source_weight(s, ei.surf), wj = source_weight(s, ej.surf);
+  double pot = ff_bound_near(ei.g, ej.g) * wj, pr = ff_bound_near(ej.g, ei.g) * wi;
+  if (!recheck_more(s, pot > pr ? pot : pr, k)) return 0;
+  double sp;
+  pot = hr_ff_pair(ei.g, ej.g, 0, &sp) * wj;
+  pr = hr_ff_pair(ej.g, ei.g, 0, &sp) * wi;
+  pot = pot > pr ? pot : pr;
+  for (int n = k, round = 0; recheck_more(s, pot, n); n *= 2, round++) {
+    const double h = pair_h(s, ei, ej, NULL, -1, n, STREAM_RECHECK + round, fs, blk, rays);
+    if (h > 0) {
+      *kout = n;
+      return h;
+    }
+  }
+  return 0;
+}
+
 /* Computes H for the pending pairs of row i (batched where every sample counts, the rest one
  * by one), appends the links of the visible ones in pair order and empties 'pd'. Returns 0 when
  * out of memory.
@@ -250,7 +359,7 @@ static int init_flush(const hr_solver *s, int i, const hr_ff_elem *gi, pending *
   double hb[HR_VF_BATCH_PAIRS], h[HR_VF_BATCH_PAIRS];
   const hr_vf_elem ei = vf_elem(s, i, gi);
   for (int q = 0; q < pd->n; q++)
-    if (pd->k[q] <= HR_VF_BATCH_SEGS) {
+    if (pd->k[q] <= HR_VF_BATCH_SEGS && pd->fs[q] == 0) {
       bs[nb] = vf_elem(s, pd->j[q], &pd->g[q]);
       kb[nb] = pd->k[q];
       qb[nb++] = q;
@@ -262,10 +371,12 @@ static int init_flush(const hr_solver *s, int i, const hr_ff_elem *gi, pending *
     int j = pd->j[q];
     const hr_ff_elem *gj = &pd->g[q];
     const hr_vf_elem ej = vf_elem(s, j, gj);
-    if (h[q] < 0)
-      h[q] = hr_vf_pair(&s->vf, ei, ej, NULL, -1, pd->k[q], STREAM_DECIDE, blk, &rw->rays);
+    const double fs = pd->fs[q];
+    if (h[q] < 0) h[q] = pair_h(s, ei, ej, NULL, -1, pd->k[q], STREAM_DECIDE, fs, blk, &rw->rays);
+    int ke = pair_rays(s);
+    if (h[q] == 0) h[q] = recheck(s, ei, ej, pd->k[q], fs, blk, &rw->rays, &ke);
     if (h[q] == 0) continue;
-    const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h[q], blk, &rw->rays);
+    const double he = estimate_h(s, ei, ej, NULL, -1, ke, h[q], fs, blk, &rw->rays);
     /* The form factors only now: most facing pairs of a large scene are hidden (museum: 8.2 M
      * of 9.2 M), and their quadrature would be wasted. */
     if (!row_push(rw, first_link(i, j, gi, gj, h[q], he), first_link(j, i, gj, gi, h[q], he)))
@@ -273,6 +384,15 @@ static int init_flush(const hr_solver *s, int i, const hr_ff_elem *gi, pending *
   }
   pd->n = pd->segs = 0;
   return 1;
+}
+
+/* f_small of pair (i, j) where it may reach HR_VF_LAND_MIN (the quadrature only then), else 0. */
+static double near_fs(const hr_ff_elem *gi, const hr_ff_elem *gj) {
+  const int si = gi->area <= gj->area;
+  if (ff_bound_near(si ? gi : gj, si ? gj : gi) < HR_VF_LAND_MIN) return 0;
+  double sp;
+  const double fs = f_small(gi, gj, hr_ff_pair(gi, gj, 0, &sp));
+  return fs >= HR_VF_LAND_MIN ? fs : 0;
 }
 
 /* Initial linking of row i: surface i against every later surface that faces it. */
@@ -298,6 +418,7 @@ static void init_row(const hr_solver *s, int i, row *rw) {
     }
     int q = pd.n++;
     pd.j[q] = j, pd.k[q] = k, pd.g[q] = gj;
+    pd.fs[q] = near_fs(&gi, &gj);
     pd.segs += k;
   }
   init_flush(s, i, &gi, &pd, &blk, rw);
@@ -309,9 +430,10 @@ int hr_link_pair(const hr_solver *s, int32_t i, int32_t j, hr_link *out, int64_t
   const hr_ff_elem gi = hr_elem_geom(s, &s->el[i]), gj = hr_elem_geom(s, &s->el[j]);
   if (!elem_in_front(&gi, &gj) || !elem_in_front(&gj, &gi)) return 0;
   const hr_vf_elem ei = vf_elem(s, i, &gi), ej = vf_elem(s, j, &gj);
-  const double h = hr_vf_pair(&s->vf, ei, ej, NULL, -1, pair_rays(s), STREAM_DECIDE, NULL, rays);
+  const double fs = near_fs(&gi, &gj);
+  const double h = pair_h(s, ei, ej, NULL, -1, pair_rays(s), STREAM_DECIDE, fs, NULL, rays);
   if (h == 0) return 0;
-  const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h, NULL, rays);
+  const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h, fs, NULL, rays);
   *out = first_link(i, j, &gi, &gj, h, he);
   return 1;
 }
@@ -424,7 +546,9 @@ static uint8_t decide(const hr_solver *s, const hr_link *l, double bf_e) {
   double er, es;
   link_err(s, l, &er, &es);
   if (er <= bf_e && es <= bf_e) return KEEP;
-  const int rs = hr_elem_splittable(s, &s->el[l->r]), ss = hr_elem_splittable(s, &s->el[l->s]);
+  const hr_elem *j = &s->el[l->s];
+  const int rs = hr_elem_splittable(s, &s->el[l->r]),
+            ss = hr_elem_splittable(s, j) || (j->child < 0 && fine_source(s, l, l->s));
   if (er >= es) return rs ? SPLIT_R : ss && es > bf_e ? SPLIT_S : KEEP;
   return ss ? SPLIT_S : rs && er > bf_e ? SPLIT_R : KEEP;
 }
@@ -970,7 +1094,7 @@ static int64_t decide_all(hr_solver *s, double bf_e, uint8_t *dec, float *bup) {
       const double *b = s->Bs[e];
       double x = b[0] > b[1] ? b[0] : b[1];
       x = x > b[2] ? x : b[2];
-      x = x > s->bvar[e] ? x : s->bvar[e];
+      x = x > fabs(s->bvar[e]) ? x : fabs(s->bvar[e]);
       float xf = (float)x;
       bup[e] = (double)xf < x ? nextafterf(xf, INFINITY) : xf;
     }

@@ -67,7 +67,10 @@ static void pp_store(hr_solver *s, int32_t idx, double gf, const double b[3],
     s->B[idx][c] = b[c];
     s->Bs[idx][c] = m->emit[c] + (b[c] - m->emit[c]) * inv;
   }
-  s->bvar[idx] = range[1] - range[0];
+  /* A leaf: how much the light of its own links may vary over it (fine sources, link.c),
+   * negated, so that a rank holding a ghost of an element tells the two kinds apart without
+   * knowing whether it has children. */
+  s->bvar[idx] = s->el[idx].child < 0 ? -s->rho_max[idx] * s->Gv[idx] : range[1] - range[0];
 }
 
 /* An inner element's radiosity: the area-weighted mean of its children's (already new) B, in
@@ -134,7 +137,7 @@ typedef struct msg_push {
 
 typedef struct msg_pull {
   uint64_t type, gid;
-  double B[3], Bs[3], range[2], change;
+  double B[3], Bs[3], range[2], change, bvar;
 } msg_pull;
 
 /* A ghost's new state: what refinement and gathering read at a source (Bs, bvar and whether it
@@ -205,10 +208,11 @@ static void dpp_complete(dpp *p, int32_t e) {
     const int32_t par = s->el[e].parent;
     if (par < 0) return;
     if (!hr_owns(s, par)) {
-      msg_pull m = {MSG_PULL, s->el[e].gid, {0}, {0}, {0}, p->change[e]};
+      msg_pull m = {MSG_PULL, s->el[e].gid, {0}, {0}, {0}, p->change[e], 0};
       memcpy(m.B, s->B[e], sizeof m.B);
       memcpy(m.Bs, s->Bs[e], sizeof m.Bs);
       memcpy(m.range, p->range[e], sizeof m.range);
+      m.bvar = s->bvar[e];
       dpp_put(p, s->eown[par], &m, sizeof m);
       return;
     }
@@ -268,7 +272,7 @@ static int dpp_receive(dpp *p, const char *buf, int64_t n) {
       memcpy(s->B[e], m.B, sizeof m.B);
       memcpy(s->Bs[e], m.Bs, sizeof m.Bs);
       memcpy(p->range[e], m.range, sizeof m.range);
-      s->bvar[e] = m.range[1] - m.range[0];
+      s->bvar[e] = m.bvar;
       p->change[e] = m.change;
       p->maxc = m.change > p->maxc ? m.change : p->maxc;
       const int32_t par = s->el[e].parent;

@@ -131,6 +131,7 @@ void hr_solver_destroy(hr_solver **ps) {
   free(s->G);
   free(s->Gu);
   free(s->Gf);
+  free(s->Gv);
   free(s->rho);
   free(s->rho_max);
   free(s->bref);
@@ -161,10 +162,10 @@ static inline double max3(const double *v) {
   return x > v[2] ? x : v[2];
 }
 
-/* do_link of one link: adds F B_j to g0..g2, Fu max(B_j) to gu and F to gf. Dead links have
- * F = 0 and add nothing to g; their Fu < 0 is skipped. */
+/* do_link of one link: adds F B_j to g0..g2, Fu max(B_j) to gu, F to gf and dF max(B_j) to gv.
+ * Dead links have F = 0 and add nothing to g; their Fu < 0 is skipped. */
 static inline void gather_link(const hr_solver *s, const hr_link *l, double *g0, double *g1,
-                               double *g2, double *gu, double *gf) {
+                               double *g2, double *gu, double *gf, double *gv) {
   const double *b = s->Bs[l->s];
   double bw[3];
   const int32_t c = s->el[l->s].child;
@@ -180,14 +181,17 @@ static inline void gather_link(const hr_solver *s, const hr_link *l, double *g0,
   *g1 += f * b[1];
   *g2 += f * b[2];
   *gf += f;
-  if (l->Fu > 0) *gu += l->Fu * max3(b);
+  if (l->Fu > 0) {
+    *gu += l->Fu * max3(b);
+    *gv += l->dF * max3(b);
+  }
 }
 
 /* do_link for every link, grouped by receiver: G_i = sum_j F_ij B_j (previous B). */
 static void gather(hr_solver *s) {
 #pragma omp parallel for schedule(dynamic, 256) if (s->nlinks > PAR_MIN) num_threads(s->threads)
   for (int64_t e = 0; e < s->nel; e++) {
-    double g0 = 0, g1 = 0, g2 = 0, gu = 0, gf = 0;
+    double g0 = 0, g1 = 0, g2 = 0, gu = 0, gf = 0, gv = 0;
     /* The sorted links and the extras, each in source gid order, merged: the sum runs in the
      * order of the sources' gids however the links are stored (hr_link_sort). */
     int64_t k = e < s->nrstart ? s->rstart[e] : 0, ke = e < s->nrstart ? s->rstart[e + 1] : 0;
@@ -199,13 +203,14 @@ static void gather(hr_solver *s) {
         l = &s->links[k++];
       else
         l = &s->links[s->xidx[x++]];
-      gather_link(s, l, &g0, &g1, &g2, &gu, &gf);
+      gather_link(s, l, &g0, &g1, &g2, &gu, &gf, &gv);
     }
     s->G[e][0] = g0;
     s->G[e][1] = g1;
     s->G[e][2] = g2;
     s->Gu[e] = gu;
     s->Gf[e] = gf;
+    s->Gv[e] = gv;
   }
 }
 

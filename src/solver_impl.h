@@ -79,6 +79,8 @@ struct hr_solver {
   double *Gu;         /* gathered without occlusion, largest channel of the sources: sum of
                          Fu max(B_j), for the oracle's reference radiosity (bref) */
   double *Gf;         /* sum of the element's own links' form factors (what it sees) */
+  double *Gv;         /* sum over the element's own links of dF max(B_j): how much the light
+                         they bring may vary over it (a leaf's bvar, see pushpull.c) */
   double (*rho)[3];   /* reflectance per element (its surface's), beside B for the oracle */
   double *rho_max;    /* largest channel of rho per element */
   double *bref;       /* per element: the radiosity the oracle measures errors against: what
@@ -88,7 +90,9 @@ struct hr_solver {
   double *open;       /* per element: the fraction of its area that light reaches and leaves
                          (hr_vf_open), estimated when it is created */
   double *bvar;       /* per element: largest minus smallest radiosity of the leaves below it
-                         (largest channel; 0 for a leaf), from the latest push-pull */
+                         (largest channel), from the latest push-pull; for a leaf, minus how
+                         much its radiosity may vary over it, -rho_max Gv (<= 0: read only for
+                         fine sources, link.c) */
   /* Links. [0, nsorted) are grouped by receiver: rstart[idx]..rstart[idx+1] (rstart has
    * nrstart+1 entries; elements created since have none there). Links refined away in an
    * incremental pass stay in place, dead (H < 0, F = 0), until the next full sort; their
@@ -198,9 +202,10 @@ void hr_elem_prune(hr_solver *s);
 /* Estimates the open fraction (hr_vf_open) of elements [lo, hi), in parallel; needs s->vis. */
 void hr_elem_open(hr_solver *s, int64_t lo, int64_t hi);
 
-/* 1 if element 'e' may be split (above A_e and not at the deepest level). */
+/* 1 if links at element 'e' may move to its children: it has some (below A_e only where a fine
+ * source was split, link.c), or it is above A_e and not at the deepest level. */
 static inline int hr_elem_splittable(const hr_solver *s, const hr_elem *e) {
-  return e->area > s->area_min && (e->child >= 0 || e->depth < HR_GID_DEPTH);
+  return e->child >= 0 || (e->area > s->area_min && e->depth < HR_GID_DEPTH);
 }
 
 /* The geometry of element 'e' for the form-factor and visibility kernels. */

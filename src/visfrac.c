@@ -6,6 +6,7 @@
 #include "visfrac.h"
 #include "vec.h"
 
+#include <math.h>
 #include <string.h>
 
 static inline uint64_t mix64(uint64_t z) {
@@ -189,6 +190,73 @@ double hr_vf_pair(const hr_vf_ctx *c, hr_vf_elem a, hr_vf_elem b, const int32_t 
   /* No sample counted: the front parts are slivers. That is no evidence of blocking: H = 1
    * keeps the link, whose unoccluded form factor is then almost surely 0. */
   return wsum > 0 ? wvis / wsum : 1.0;
+}
+
+/* 1 if point y of the plane of element e lies inside it (convex, corners in either order). */
+static int elem_contains(const hr_ff_elem *e, hr_vec3 y) {
+  int pos = 0, neg = 0;
+  for (int k = 0; k < e->nv; k++) {
+    const hr_vec3 a = e->p[k], b = e->p[(k + 1) % e->nv];
+    const double d = v3_dot(v3_cross(v3_sub(b, a), v3_sub(y, a)), e->n);
+    pos |= d > 0;
+    neg |= d < 0;
+  }
+  return !(pos && neg);
+}
+
+/* Trials per counted sample before hr_vf_pair_land gives up on its estimator: a landing chance
+ * below 1/LAND_TRIALS is far below what the caller picks it for (HR_VF_LAND_MIN). */
+#define LAND_TRIALS 64
+
+double hr_vf_pair_land(const hr_vf_ctx *c, hr_vf_elem a, hr_vf_elem b, const int32_t *cand,
+                       int ncand, int k, int stream, hr_blockers *blk, int64_t *rays) {
+  if (ncand == 0) return 1.0;
+  /* Rays leave the smaller element (by area, then gid): the pair, not the call, decides. */
+  if (b.g->area < a.g->area || (b.g->area == a.g->area && b.gid < a.gid)) {
+    hr_vf_elem t = a;
+    a = b;
+    b = t;
+  }
+  const hr_ff_elem *ga = a.g, *gb = b.g;
+  const double invk = 1.0 / k;
+  const int lifted = ncand < 0 || ncand > CAND_BRUTE_MAX;
+  const double lift = lifted ? c->lift : 0;
+  const hr_vec3 la = v3_scale(ga->n, lift), lb = v3_scale(gb->n, lift);
+  hr_vec3 t1 = fabs(ga->n.x) < 0.9 ? (hr_vec3){1, 0, 0} : (hr_vec3){0, 1, 0};
+  const hr_vec3 e1 = v3_norm(v3_cross(ga->n, t1)), e2 = v3_cross(ga->n, e1);
+  const uint64_t key = hr_hash4(c->seed, a.gid, b.gid, 64 + (uint64_t)stream);
+  float org[CHUNK * 3], dst[CHUNK * 3];
+  uint8_t vis[CHUNK];
+  int landed = 0, seen = 0, i = 0;
+  const int maxi = LAND_TRIALS * k;
+  while (landed < k && i < maxi) {
+    int n = 0;
+    for (; n < CHUNK && landed + n < k && i < maxi; i++) {
+      double uv[4];
+      sample_params(key, i, k, invk, uv);
+      /* a point of a, a cosine-distributed direction: rays that land on b sample b with the
+       * density of the form-factor kernel */
+      const hr_vec3 x = elem_point(ga, uv[0], uv[1]);
+      const double phi = 2 * M_PI * uv[3], sr = sqrt(uv[2]);
+      const hr_vec3 d = v3_add(v3_scale(ga->n, sqrt(1 - uv[2])),
+                               v3_add(v3_scale(e1, sr * cos(phi)), v3_scale(e2, sr * sin(phi))));
+      const double dn = v3_dot(d, gb->n), h = v3_dot(v3_sub(x, gb->p[0]), gb->n);
+      if (!(dn < 0 && h > 0)) continue; /* b's back, or x behind b's plane */
+      const hr_vec3 y = v3_add(x, v3_scale(d, -h / dn));
+      if (!elem_contains(gb, y)) continue;
+      put3(org + 3 * n, v3_add(x, la));
+      put3(dst + 3 * n, v3_add(y, lb));
+      n++;
+    }
+    if (n == 0) continue;
+    cast(c, cand, ncand, blk, n, org, dst, a.surf, b.surf, vis);
+    for (int q = 0; q < n; q++) seen += vis[q] != 0;
+    landed += n;
+    *rays += n;
+  }
+  /* Too few landed: b is a sliver as seen from a; the kernel-weighted estimator decides. */
+  if (landed < k) return hr_vf_pair(c, a, b, cand, ncand, k, stream, blk, rays);
+  return (double)seen / landed;
 }
 
 void hr_vf_batch(const hr_vf_ctx *c, hr_vf_elem a, const hr_vf_elem *bs, const int *ks, int np,
