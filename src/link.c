@@ -200,9 +200,14 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
  * into a split leaf then refine to its children as any links do (hr_elem_splittable). */
 static int fine_source(const hr_solver *s, const hr_link *l, int32_t j) {
   const hr_elem *r = &s->el[l->r], *e = &s->el[j];
-  if (r->parent >= 0 || r->area > s->area_min || e->area <= 0.25 * r->area ||
-      e->area <= s->area_min / 16 || e->depth >= HR_GID_DEPTH)
+  if (r->parent >= 0 || r->area > s->area_min || e->area <= s->area_min / 16 ||
+      e->depth >= HR_GID_DEPTH)
     return 0;
+  /* the part of the source the receiver sees, about its size plus twice its distance squared:
+   * the source splits while it is larger than an eighth of that */
+  const double d = fabs(v3_dot(v3_sub(r->c, e->p[0]), s->scene->surfs[e->surf].normal));
+  const double fp = sqrt(r->area) + 2 * d;
+  if (e->area <= 0.125 * fp * fp) return 0;
   const double as = s->el[l->s].area;
   return l->Fu * r->area / (r->area < as ? r->area : as) >= HR_VF_LAND_MIN;
 }
