@@ -150,6 +150,11 @@ static void on_off(const char *name, double tol) {
  * A_e above the tiles' area: a tile's centre lies under the box, from where the box's sides
  * send nothing; a form factor from that point alone (an earlier shortcut for small receivers)
  * lost the light the sides send to the rest of the tile (museum's floors were 9% dark). */
+/* Without clustering fine sources split the tile under the box's sides (link.c): measured 0.11%
+ * from the path tracer. With clustering they are off (docs/design.md) and the tile is 19.9%
+ * bright, as both modes were before fine sources: the bound catches anything worse. */
+#define PLINTH_TOL_OFF 0.01
+#define PLINTH_TOL_ON 0.21
 static void plinth(void) {
   hr_scene *s;
   hr_scene_create("plinth", &s);
@@ -174,10 +179,25 @@ static void plinth(void) {
   double x[3], y[3];
   hr_solver_poly_radiosity(off, 0, x);
   hr_solver_poly_radiosity(on, 0, y);
-  const double d = fabs(y[0] - x[0]) / x[0];
-  printf("plinth: the tile under the box, clustering on against off: %.3f%% (tol 1%%)\n",
-         100 * d);
-  CHECK(d <= 0.01, "tile under the box: %.3f%% apart", 100 * d);
+  /* against the path tracer: without clustering the box's sides split the tile below A_e (fine
+   * sources, link.c), with it they do not, so the two differ by design */
+  double(*ref)[3] = malloc((size_t)s->npolys * sizeof *ref);
+  double(*se)[3] = malloc((size_t)s->npolys * sizeof *se);
+  hr_pt_options po;
+  hr_pt_options_default(&po);
+  po.paths = 400000;
+  po.threads = 2;
+  hr_err err = {{0}};
+  CHECK(hr_pt_polys(s, &po, ref, se, &err) == HR_OK, "path tracer: %s", err.msg);
+  const double doff = fabs(x[0] - ref[0][0]) / ref[0][0];
+  const double don = fabs(y[0] - ref[0][0]) / ref[0][0];
+  printf("plinth: the tile under the box against the path tracer (%.4f +- %.4f): clustering off "
+         "%.3f%% (tol %.0f%%), on %.3f%% (tol %.0f%%)\n",
+         ref[0][0], se[0][0], 100 * doff, 100 * PLINTH_TOL_OFF, 100 * don, 100 * PLINTH_TOL_ON);
+  CHECK(doff <= PLINTH_TOL_OFF, "tile under the box, clustering off: %.3f%% off", 100 * doff);
+  CHECK(don <= PLINTH_TOL_ON, "tile under the box, clustering on: %.3f%% off", 100 * don);
+  free(ref);
+  free(se);
   hr_solver_destroy(&on);
   hr_solver_destroy(&off);
   hr_scene_destroy(&s);
