@@ -77,21 +77,21 @@ static int elem_in_front(const hr_ff_elem *a, const hr_ff_elem *b) {
 /* Upper bound of the form factor from receiver r to source j with the cosines bounded by 1:
  * the refinement oracle's measure for links whose quadrature found nothing although parts of
  * the elements face each other. */
+static hr_vec3 corner_mean(const hr_ff_elem *e) {
+  hr_vec3 c = {0, 0, 0};
+  for (int k = 0; k < e->nv; k++) c = v3_add(c, e->p[k]);
+  return v3_scale(c, 1.0 / e->nv);
+}
+
 static double ff_bound(const hr_ff_elem *r, const hr_ff_elem *j) {
-  hr_vec3 cr = {0, 0, 0}, cj = {0, 0, 0};
-  for (int k = 0; k < r->nv; k++) cr = v3_add(cr, r->p[k]);
-  for (int k = 0; k < j->nv; k++) cj = v3_add(cj, j->p[k]);
-  hr_vec3 d = v3_sub(v3_scale(cj, 1.0 / j->nv), v3_scale(cr, 1.0 / r->nv));
+  const hr_vec3 d = v3_sub(corner_mean(j), corner_mean(r));
   return j->area / (M_PI * v3_dot(d, d) + j->area);
 }
 
 /* Upper bound of the form factor from r to j, cosines bounded by 1 and the distance by the gap
  * between the bounding spheres of the two elements (1 where they overlap). */
 static double ff_bound_near(const hr_ff_elem *r, const hr_ff_elem *j) {
-  hr_vec3 cr = {0, 0, 0}, cj = {0, 0, 0};
-  for (int k = 0; k < r->nv; k++) cr = v3_add(cr, r->p[k]);
-  for (int k = 0; k < j->nv; k++) cj = v3_add(cj, j->p[k]);
-  cr = v3_scale(cr, 1.0 / r->nv), cj = v3_scale(cj, 1.0 / j->nv);
+  const hr_vec3 cr = corner_mean(r), cj = corner_mean(j);
   double rr = 0, rj = 0;
   for (int k = 0; k < r->nv; k++) rr = fmax(rr, v3_len(v3_sub(r->p[k], cr)));
   for (int k = 0; k < j->nv; k++) rj = fmax(rj, v3_len(v3_sub(j->p[k], cj)));
@@ -146,7 +146,8 @@ static double f_small(const hr_ff_elem *r, const hr_ff_elem *j, double fu) {
  * small faces in front of it worse: office 2.9% -> 3.6%, hall:2 clustered 12.2% -> 15.1%). */
 static double pair_h(const hr_solver *s, hr_vf_elem a, hr_vf_elem b, const int32_t *cand,
                      int ncand, int k, int stream, double fs, hr_blockers *blk, int64_t *rays) {
-  if (fs >= HR_VF_LAND_MIN && !s->cl) return hr_vf_pair_land(&s->vf, a, b, cand, ncand, k, stream, blk, rays);
+  if (fs >= HR_VF_LAND_MIN && !s->cl)
+    return hr_vf_pair_land(&s->vf, a, b, cand, ncand, k, stream, blk, rays);
   return hr_vf_pair(&s->vf, a, b, cand, ncand, k, stream, blk, rays);
 }
 
@@ -190,16 +191,17 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
   l->dS = (float)link_ds(&gr, &gj, fu, hd);
 }
 
-/* Fine sources. A receiver that cannot be split (at most A_e) close to a larger leaf sees the
- * part of that leaf next to it, whose radiosity may differ from the leaf's mean: in `office` a
- * desk leg 4 cm from a wall sees the wall in the shadow of the leg and of the desk top, and a book
- * 4 cm from the bookshelf's side the strip of the side next to it; with the leaf's mean they
- * came out 40-85% too bright. The link then measures the leaf's own variation (a leaf's bvar:
- * the spread of the light its links bring, pushpull.c) with its source term and may split it
- * below A_e: 1 for element j (the link's source or one of its children) when the receiver is at
- * most A_e, the link is near (the form factor from the smaller element to the larger at least
- * HR_VF_LAND_MIN) and j is larger than a quarter of the receiver and than A_e / 16. The links
- * into a split leaf then refine to its children as any links do (hr_elem_splittable). */
+/* Fine sources. An input polygon that cannot be split (at most A_e) close to a larger leaf sees
+ * the part of that leaf next to it, whose radiosity may differ from the leaf's mean: in `office`
+ * a desk leg 4 cm from a wall sees the wall in the shadow of the leg and of the desk top, and a
+ * book 4 cm from the bookshelf's side the strip of the side next to it; with the leaf's mean
+ * they came out 40-85% too bright. The link then measures the leaf's own variation (a leaf's
+ * bvar: the spread of the light its links bring, pushpull.c) with its source term and may split
+ * it below A_e: 1 for element j (the link's source or one of its children) when the receiver is
+ * an input polygon of at most A_e, the link is near (the form factor from the smaller element to
+ * the larger at least HR_VF_LAND_MIN), and j is larger than A_e / 16 and than an eighth of the
+ * part of it the receiver sees. The links into a split leaf then refine to its children as any
+ * links do (hr_elem_splittable). */
 static int fine_source(const hr_solver *s, const hr_link *l, int32_t j) {
   if (s->cl) return 0; /* not with clustering yet (docs/design.md, "Fine sources") */
   const hr_elem *r = &s->el[l->r], *e = &s->el[j];
@@ -359,7 +361,7 @@ static double recheck(const hr_solver *s, hr_vf_elem ei, hr_vf_elem ej, int k, d
  * The k segments of a pair are cast against the whole scene: most pairs of a large scene are
  * hidden from each other, and most initial links are never refined, so a candidate list is
  * built only when a link first splits (see hr_link_refine). A pair all of whose k segments are
- * blocked is taken as mutually invisible. */
+ * blocked is taken as mutually invisible unless it could carry light enough to recheck. */
 static int init_flush(const hr_solver *s, int i, const hr_ff_elem *gi, pending *pd,
                       hr_blockers *blk, row *rw) {
   hr_vf_elem bs[HR_VF_BATCH_PAIRS] = {{NULL, 0, 0}};

@@ -182,8 +182,9 @@ static inline void gather_link(const hr_solver *s, const hr_link *l, double *g0,
   *g2 += f * b[2];
   *gf += f;
   if (l->Fu > 0) {
-    *gu += l->Fu * max3(b);
-    *gv += l->dF * max3(b);
+    const double bm = max3(b);
+    *gu += l->Fu * bm;
+    *gv += l->dF * bm;
   }
 }
 
