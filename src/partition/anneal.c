@@ -39,6 +39,11 @@
 #define MEAN_WEIGHT 0.125
 /* One proposal in this many is a swap of two nodes between parts (try_swap). */
 #define SWAP_ODDS 2
+/* The annealer keeps each node's connection to each part in a table (n x nparts doubles) when it
+ * has at most this many entries (32 MB): a proposal then costs O(1) instead of a scan of the
+ * node's edges, which on the dense patch/link graphs (hundreds of edges a node) was most of the
+ * time. Larger graphs scan. */
+#define TABLE_MAX (INT64_C(1) << 22)
 
 /* ---- cost ---------------------------------------------------------------------------------- */
 
@@ -123,6 +128,9 @@ typedef struct anneal_state {
   int32_t *journal;
   int64_t njournal;
   int stale;
+  /* NULL, or conn[v * nparts + p] = the weight of v's edges into part p, and eall[v] that of
+   * all of v's edges (self-loops left out of both) */
+  double *conn, *eall;
 } anneal_state;
 
 /* A proposed move and its effect on the two parts involved. */
@@ -177,11 +185,26 @@ static void state_save_best(anneal_state *st) {
 }
 
 /* Sets up the loads of st->part (the caller's start) and takes it as the best so far. The
- * arrays are the caller's: nparts loads each, n entries for best and journal. */
+ * arrays are the caller's: nparts loads each, n entries for best and journal, and 'table' NULL
+ * (scan the edges) or n (nparts + 1) entries for the connection table. */
 static void state_init(anneal_state *st, const hr_graph *g, int nparts, double alpha,
-                       int32_t *part, double *W, double *C, int32_t *best, int32_t *journal) {
+                       int32_t *part, double *W, double *C, int32_t *best, int32_t *journal,
+                       double *table) {
   *st = (anneal_state){.g = g, .nparts = nparts, .alpha = alpha, .part = part, .W = W, .C = C,
                        .best = best, .journal = journal, .stale = 1};
+  if (table) {
+    const size_t np = (size_t)nparts;
+    st->conn = table;
+    st->eall = table + (size_t)g->n * np;
+    memset(table, 0, (size_t)g->n * (np + 1) * sizeof *table);
+    for (int v = 0; v < g->n; v++)
+      for (int64_t k = g->xadj[v]; k < g->xadj[v + 1]; k++) {
+        const int32_t u = g->adj[k];
+        if (u == v) continue;
+        st->conn[(size_t)v * np + (size_t)part[u]] += g->c[k];
+        st->eall[v] += g->c[k];
+      }
+  }
   part_loads(g, part, nparts, W, C);
   state_rank(st);
   state_save_best(st);
@@ -205,38 +228,65 @@ static int propose(const anneal_state *st, uint64_t *rng, move *m) {
   return m->to != m->from;
 }
 
+/* The weight of v's edges into parts p and q, and of all of them (a self-loop moves with its
+ * node and counts in none): from the table, or by a scan of v's edges (the slow reference). */
+static void edges_into(const anneal_state *st, int32_t v, int p, int q, double *ep, double *eq,
+                       double *eall) {
+  if (st->conn) {
+    *ep = st->conn[(size_t)v * (size_t)st->nparts + (size_t)p];
+    *eq = st->conn[(size_t)v * (size_t)st->nparts + (size_t)q];
+    *eall = st->eall[v];
+    return;
+  }
+  const hr_graph *g = st->g;
+  double a = 0.0, b = 0.0, all = 0.0;
+  for (int64_t k = g->xadj[v]; k < g->xadj[v + 1]; k++) {
+    const int32_t u = g->adj[k];
+    if (u == v) continue;
+    all += g->c[k];
+    if (st->part[u] == p) a += g->c[k];
+    else if (st->part[u] == q) b += g->c[k];
+  }
+  *ep = a, *eq = b, *eall = all;
+}
+
+/* The cost of the costliest part other than a and b (0 when there is none: costs are >= 0). */
+static double third_cost(const anneal_state *st, int a, int b) {
+  for (int k = 0; k < 3; k++) {
+    const int p = st->top[k];
+    if (p >= 0 && p != a && p != b) return state_cost(st, p);
+  }
+  return 0.0;
+}
+
 /* Fills in the loads, Z and sum after m. Only the two parts involved change: an edge from v to
  * a third part is cut before and after. */
 static void evaluate(const anneal_state *st, move *m) {
   const hr_graph *g = st->g;
-  double e_from = 0.0, e_to = 0.0, e_all = 0.0;
-  for (int64_t k = g->xadj[m->v]; k < g->xadj[m->v + 1]; k++) {
-    const int32_t u = g->adj[k];
-    if (u == m->v) continue; /* a self-loop moves with its node */
-    e_all += g->c[k];
-    if (st->part[u] == m->from) e_from += g->c[k];
-    else if (st->part[u] == m->to) e_to += g->c[k];
-  }
+  double e_from, e_to, e_all;
+  edges_into(st, m->v, m->from, m->to, &e_from, &e_to, &e_all);
   m->c_from = st->C[m->from] - (e_all - e_from) + e_from;
   m->c_to = st->C[m->to] + (e_all - e_to) - e_to;
   m->w_from = st->W[m->from] - g->w[m->v];
   m->w_to = st->W[m->to] + g->w[m->v];
   const double cf = part_cost(st->alpha, m->c_from, m->w_from);
   const double ct = part_cost(st->alpha, m->c_to, m->w_to);
-  double rest = 0.0; /* costs are >= 0, so 0 stands for "no third part" */
-  for (int k = 0; k < 3; k++) {
-    const int p = st->top[k];
-    if (p >= 0 && p != m->from && p != m->to) {
-      rest = state_cost(st, p);
-      break;
-    }
-  }
-  m->z = fmax(rest, fmax(cf, ct));
+  m->z = fmax(third_cost(st, m->from, m->to), fmax(cf, ct));
   m->sum = st->sum - state_cost(st, m->from) - state_cost(st, m->to) + cf + ct;
 }
 
 /* Makes move m (evaluated) without looking at the best partition. */
 static void apply_raw(anneal_state *st, const move *m) {
+  if (st->conn) {
+    const hr_graph *g = st->g;
+    const size_t np = (size_t)st->nparts;
+    for (int64_t k = g->xadj[m->v]; k < g->xadj[m->v + 1]; k++) {
+      const int32_t u = g->adj[k];
+      if (u == m->v) continue;
+      st->conn[(size_t)u * np + (size_t)m->from] -= g->c[k];
+      st->conn[(size_t)u * np + (size_t)m->to] += g->c[k];
+    }
+  }
   st->part[m->v] = m->to;
   st->C[m->from] = m->c_from;
   st->C[m->to] = m->c_to;
@@ -258,27 +308,33 @@ static void apply(anneal_state *st, const move *m) {
  * equal weights. Single moves alone cannot leave a state where two groups share a part and
  * another part is nearly empty: every step on the way raises the heaviest part (measured: a
  * random graph of 4 planted groups ended with two groups merged, Z 1.5 times the planted one).
- * Metropolis on the energy change of both moves together; returns 0 if no swap was drawn. */
+ * Metropolis on the energy change of both moves together, computed without making either (the
+ * edge v-u is the drawn entry's weight: exact when the graph has no parallel edges, and only
+ * the decision would be off otherwise, never the loads); returns 0 if no swap was drawn. */
 static int try_swap(anneal_state *st, uint64_t *rng, double t) {
   const hr_graph *g = st->g;
   const int32_t v = (int32_t)rng_below(rng, g->n);
   const int64_t deg = g->xadj[v + 1] - g->xadj[v];
   if (deg == 0) return 0;
-  const int32_t u = g->adj[g->xadj[v] + rng_below(rng, deg)];
-  if (u == v || st->part[u] == st->part[v]) return 0;
-  const double e0 = state_energy(st, st->z, st->sum);
-  move m1 = {.v = v, .from = st->part[v], .to = st->part[u]};
+  const int64_t k = g->xadj[v] + rng_below(rng, deg);
+  const int32_t u = g->adj[k], a = st->part[v], b = st->part[u];
+  if (u == v || a == b) return 0;
+  move m1 = {.v = v, .from = a, .to = b};
   evaluate(st, &m1);
-  apply_raw(st, &m1);
-  move m2 = {.v = u, .from = m1.to, .to = m1.from};
-  evaluate(st, &m2);
-  const double delta = state_energy(st, m2.z, m2.sum) - e0;
+  /* u's move from b to a once v is in b: v's edge to u no longer leaves b, and now leaves a */
+  double eb, ea, eall;
+  edges_into(st, u, b, a, &eb, &ea, &eall);
+  eb += g->c[k], ea -= g->c[k];
+  const double cb = part_cost(st->alpha, m1.c_to - (eall - eb) + eb, m1.w_to - g->w[u]);
+  const double ca = part_cost(st->alpha, m1.c_from + (eall - ea) - ea, m1.w_from + g->w[u]);
+  const double z = fmax(third_cost(st, a, b), fmax(ca, cb));
+  const double sum = st->sum - state_cost(st, a) - state_cost(st, b) + ca + cb;
+  const double delta = state_energy(st, z, sum) - state_energy(st, st->z, st->sum);
   if (delta <= 0.0 || (t > 0.0 && rng_unit(rng) < exp(-delta / t))) {
+    apply_raw(st, &m1);
+    move m2 = {.v = u, .from = b, .to = a};
+    evaluate(st, &m2);
     apply(st, &m2);
-  } else {
-    move back = {.v = v, .from = m1.to, .to = m1.from};
-    evaluate(st, &back);
-    apply_raw(st, &back);
   }
   return 1;
 }
@@ -324,24 +380,55 @@ static void anneal_run(anneal_state *st, int64_t moves, double t_start, double t
 
 static int valid_input(const hr_graph *g, int nparts, const int32_t *part);
 
-double hr_partition_anneal_drift(const hr_graph *g, int nparts, double alpha, uint64_t seed,
-                                 int64_t moves, int32_t *part) {
-  if (!valid_input(g, nparts, part) || g->n == 0 || nparts < 2 || moves < 0) return -1.0;
+/* The connection table, when g and nparts are small enough for one: n (nparts + 1) doubles
+ * (NULL otherwise, or when out of memory: the scan gives the same walk, only slower). */
+static double *table_new(const hr_graph *g, int nparts) {
+  const int64_t entries = (int64_t)g->n * (nparts + 1);
+  return entries <= TABLE_MAX ? malloc((size_t)(entries > 0 ? entries : 1) * sizeof(double))
+                              : NULL;
+}
+
+/* A hot walk of 'moves' proposals from 'part' with or without the connection table; the
+ * relative drift of the incremental Z (and of the table's entries) from recomputed ones. */
+static double walk_drift(const hr_graph *g, int nparts, double alpha, uint64_t seed,
+                         int64_t moves, int32_t *part, int with_table) {
   const size_t n = (size_t)g->n;
   double *W = malloc((size_t)nparts * sizeof *W), *C = malloc((size_t)nparts * sizeof *C);
   int32_t *best = malloc(n * sizeof *best), *journal = malloc(n * sizeof *journal);
+  double *table = with_table ? table_new(g, nparts) : NULL;
   double drift = -1.0;
-  if (W && C && best && journal) {
+  if (W && C && best && journal && (table || !with_table)) {
     anneal_state st;
     uint64_t rng = seed;
-    state_init(&st, g, nparts, alpha, part, W, C, best, journal);
+    state_init(&st, g, nparts, alpha, part, W, C, best, journal, table);
     const double t0 = typical_delta(&st, &rng);
     anneal_run(&st, moves, t0, t0, &rng); /* a hot walk: many accepted moves and swaps */
     const double z = hr_partition_cost(g, part, nparts, alpha, NULL, NULL);
     drift = z > 0.0 ? fabs(st.z - z) / z : fabs(st.z - z);
+    for (int32_t v = 0; table && v < g->n; v++) /* each entry against a fresh scan */
+      for (int p = 0; p < nparts; p++) {
+        double e, unused, all;
+        anneal_state scan = st;
+        scan.conn = NULL;
+        edges_into(&scan, v, p, p, &e, &unused, &all);
+        const double te = st.conn[(size_t)v * (size_t)nparts + (size_t)p];
+        drift = fmax(drift, fabs(te - e) / (all > 0.0 ? all : 1.0));
+      }
   }
-  free(W), free(C), free(best), free(journal);
+  free(W), free(C), free(best), free(journal), free(table);
   return drift;
+}
+
+double hr_partition_anneal_drift(const hr_graph *g, int nparts, double alpha, uint64_t seed,
+                                 int64_t moves, int32_t *part) {
+  if (!valid_input(g, nparts, part) || g->n == 0 || nparts < 2 || moves < 0) return -1.0;
+  int32_t *copy = malloc((size_t)g->n * sizeof *copy);
+  if (!copy) return -1.0;
+  memcpy(copy, part, (size_t)g->n * sizeof *copy);
+  const double a = walk_drift(g, nparts, alpha, seed, moves, copy, 1);
+  const double b = walk_drift(g, nparts, alpha, seed, moves, part, 0);
+  free(copy);
+  return a < 0.0 || b < 0.0 ? -1.0 : fmax(a, b);
 }
 
 /* Anneals 'part' on g from the temperature 'hot' times the typical |delta| down to a thousandth
@@ -351,10 +438,11 @@ static int anneal_graph(const hr_graph *g, int nparts, double alpha, int32_t *pa
   const size_t n = (size_t)(g->n > 0 ? g->n : 1);
   double *W = malloc((size_t)nparts * sizeof *W), *C = malloc((size_t)nparts * sizeof *C);
   int32_t *best = malloc(n * sizeof *best), *journal = malloc(n * sizeof *journal);
+  double *table = table_new(g, nparts);
   const int ok = W && C && best && journal;
   if (ok) {
     anneal_state st;
-    state_init(&st, g, nparts, alpha, part, W, C, best, journal);
+    state_init(&st, g, nparts, alpha, part, W, C, best, journal, table);
     const double t0 = hot * typical_delta(&st, rng);
     anneal_run(&st, moves, t0, t0 * 1e-3, rng);
     memcpy(part, best, (size_t)g->n * sizeof *part);
@@ -363,6 +451,7 @@ static int anneal_graph(const hr_graph *g, int nparts, double alpha, int32_t *pa
   free(C);
   free(best);
   free(journal);
+  free(table);
   return ok;
 }
 
