@@ -125,6 +125,9 @@ static int reserve(hr_solver *s, int64_t need) {
   double *Gv = realloc(s->Gv, (size_t)nc * sizeof *Gv);
   if (!Gv) return 0;
   s->Gv = Gv;
+  float *er = realloc(s->erays, (size_t)nc * sizeof *er);
+  if (!er) return 0;
+  s->erays = er;
   double(*rho)[3] = realloc(s->rho, (size_t)nc * sizeof *rho);
   if (!rho) return 0;
   s->rho = rho;
@@ -185,6 +188,7 @@ hr_status hr_elem_init(hr_solver *s) {
     s->rho_max[i] = fmax(R[0], fmax(R[1], R[2]));
     s->bref[i] = 1; /* set by push-pull */
     s->Gu[i] = s->Gf[i] = s->Gv[i] = 0;
+    s->erays[i] = 0;
     s->bvar[i] = 0;
     s->open[i] = 1; /* hr_elem_open, once the ray caster exists */
   }
@@ -250,6 +254,7 @@ hr_status hr_elem_subdivide(hr_solver *s, int32_t idx) {
       s->Bs[first + k][c] = s->Bs[idx][c];
       s->G[first + k][c] = 0;
       s->Gu[first + k] = s->Gf[first + k] = s->Gv[first + k] = 0;
+      s->erays[first + k] = 0;
       s->rho[first + k][c] = s->rho[idx][c];
     }
     s->rho_max[first + k] = s->rho_max[idx];
@@ -320,6 +325,7 @@ void hr_elem_compact(hr_solver *s, const uint8_t *keep) {
     memcpy(s->rho[d], s->rho[e], sizeof s->rho[d]);
     s->Gu[d] = s->Gu[e], s->Gf[d] = s->Gf[e], s->Gv[d] = s->Gv[e], s->rho_max[d] = s->rho_max[e];
     s->bref[d] = s->bref[e], s->open[d] = s->open[e], s->bvar[d] = s->bvar[e];
+    s->erays[d] = s->erays[e];
     s->eown[d] = s->eown[e], s->esub[d] = s->esub[e];
   }
   for (int64_t i = 0; i < s->nlinks; i++) {

@@ -1288,7 +1288,11 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
                           : hr_shaft_filter(s->scene, pa, na, s->el[cl->r].surf, pb, nb,
                                             s->el[cl->s].surf, s->pool + pl->cand_off, pl->ncand,
                                             s->pool + off);
+          const int64_t r0 = rays;
           link_eval(s, s->pool, cl, &rays);
+          const float cast = (float)(rays - r0); /* the receiver's work (balance.c) */
+#pragma omp atomic
+          s->erays[cl->r] += cast;
         }
       }
       s->npool = pool0 + nchild_cand;

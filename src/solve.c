@@ -132,6 +132,7 @@ void hr_solver_destroy(hr_solver **ps) {
   free(s->Gu);
   free(s->Gf);
   free(s->Gv);
+  free(s->erays);
   free(s->rho);
   free(s->rho_max);
   free(s->bref);
