@@ -6,12 +6,13 @@
  * The graph: one node per element (gid order), its weight W the work that stays with the
  * element's owner, per iteration: the links it receives (each is gathered and tested every
  * iteration), one (its push-pull), and the rays refinement cast for its links since the last
- * balancing, per iteration, at RAY_WORK links a ray; edges are the links (an element receives from another: weight 1 per link,
- * what a cut link costs in store messages and ghost state) and the tree edges (parent and child:
- * weight 2, a push and a pull). Rank 0 gathers it; for annealing every rank runs its own chain
- * from the same start (ORB's partition) with its own seed, and the best Z wins (the paper's
- * parallel annealing, its reference [1], one period). A new partition is expressed as a subtree
- * map: an element is listed only where its rank differs from its parent's. */
+ * balancing, per iteration, at RAY_WORK links a ray; edges are the links (an element receives
+ * from another: weight 1 per link, what a cut link costs in store messages and ghost state) and
+ * the tree edges (parent and child: weight 2, a push and a pull). Rank 0 gathers it; for
+ * annealing every rank runs its own chain from the same start (ORB's partition) with its own
+ * seed, and the best Z wins (the paper's parallel annealing, its reference [1], one period). A
+ * new partition is expressed as a subtree map: an element is listed only where its rank differs
+ * from its parent's. */
 #include "mpi/dist.h"
 #include "partition/partition.h"
 #include "solver_impl.h"

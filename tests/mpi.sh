@@ -159,9 +159,11 @@ same "$t/c1" "$t/kkr" cornell "3-rank job killed (kill -9), resumed on 2 ranks $
         if (id[1, i] != id[2, i]) exit 1
         d = w[1, i] - w[2, i]; if (d < 0) d = -d; if (d > 1e-9 * w[1, i]) exit 1
         sw += w[1, i] }
-      printf "%d nodes, %d links, W sum %.0f", n[1], L, sw; exit !(L > 0 && sw > 1.05 * (n[1] + L)) }' "$t/g1.graph" "$t/g2.graph" > "$t/gw" \
+      printf "%d nodes, %d links, W sum %.0f", n[1], L, sw
+      exit !(L > 0 && sw > 1.05 * (n[1] + L)) }' "$t/g1.graph" "$t/g2.graph" > "$t/gw" \
   && ok "balancing weights with refinement's rays, the same on 2 ranks as on one: $(cat "$t/gw")" \
-  || bad "balancing weights differ between 1 process and 2 ranks, or carry no rays: $(cat "$t/gw" 2>/dev/null)"
+  || bad "balancing weights differ between 1 process and 2 ranks, or carry no rays:" \
+    "$(cat "$t/gw" 2>/dev/null)"
 mpi 2 --quiet --balance nonsense -o "$t/y" cornell 2> "$t/err"
 [ "$(grep -c "^hrad: --balance must be" "$t/err")" = 1 ] && ok "--balance nonsense: one usage line" \
   || { bad "--balance nonsense"; cat "$t/err"; }
