@@ -5,10 +5,12 @@
  *
  * The graph: one node per element (gid order), its weight W the work that stays with the
  * element's owner, per iteration: the links it receives (each is gathered and tested every
- * iteration), one (its push-pull), and the rays refinement cast for its links since the last
- * balancing, per iteration, at RAY_WORK links a ray; edges are the links (an element receives
- * from another: weight 1 per link, what a cut link costs in store messages and ghost state) and
- * the tree edges (parent and child: weight 2, a push and a pull). Rank 0 gathers it; for
+ * iteration), one (its push-pull), and the rays refinement cast for its links so far, per
+ * iteration, at RAY_WORK links a ray (counted since the start: counted since the last
+ * balancing, the work of a few iterations was too bursty to predict the next ones, and museum
+ * at 2 ranks migrated at all 8 balancings); edges are the links (an element receives from
+ * another: weight 1 per link, what a cut link costs in store messages and ghost state) and the
+ * tree edges (parent and child: weight 2, a push and a pull). Rank 0 gathers it; for
  * annealing every rank runs its own chain from the same start (ORB's partition) with its own
  * seed, and the best Z wins (the paper's parallel annealing, its reference [1], one period). A
  * new partition is expressed as a subtree map: an element is listed only where its rank differs
@@ -244,7 +246,7 @@ static hr_status gather_graph(hr_solver *s, bgraph *g, hr_err *err) {
   for (int64_t k = 0; k < s->nlinks; k++)
     if (s->links[k].Fu >= 0) recv[s->links[k].r]++;
   int64_t i = 0;
-  const int iters = s->iterations - s->work_iter0 > 1 ? s->iterations - s->work_iter0 : 1;
+  const int iters = s->iterations > 1 ? s->iterations : 1;
   for (int64_t e = 0; e < s->nel; e++) {
     const double rw = RAY_WORK * s->erays[e] / iters;
     if (!hr_owns(s, e)) {
@@ -333,8 +335,6 @@ hr_status hr_solver_balance(hr_solver *s, int method, hr_err *err) {
   bgraph g;
   hr_status st = gather_graph(s, &g, err);
   if (st != HR_OK) return st;
-  for (int64_t e = 0; e < s->nel; e++) s->erays[e] = 0; /* the next one counts afresh */
-  s->work_iter0 = s->iterations;
   const int P = s->nranks;
   if (method == HR_BALANCE_ANNEAL) share_graph(s, &g);
   int32_t *part = NULL;

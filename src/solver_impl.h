@@ -89,8 +89,8 @@ struct hr_solver {
                          push-pull */
   double *open;       /* per element: the fraction of its area that light reaches and leaves
                          (hr_vf_open), estimated when it is created */
-  float *erays;       /* per element: rays cast in refinement for links it receives since the
-                         last balancing (this rank's share; balance.c's measured work) */
+  float *erays;       /* per element: rays cast in refinement for links it receives (this
+                         rank's share; balance.c's measured work) */
   double *bvar;       /* per element: largest minus smallest radiosity of the leaves below it
                          (largest channel), from the latest push-pull; for a leaf, minus how
                          much its radiosity may vary over it, -rho_max Gv (<= 0: read only for
@@ -159,7 +159,6 @@ struct hr_solver {
   double bal_alpha, bal_idle;
   int64_t nbalance, nmoved; /* balancings done, and those that moved elements */
   int bal_last;       /* the iteration after which it last balanced */
-  int work_iter0;     /* the iteration from which erays counts */
   int64_t bal_links;  /* the link count (all ranks) then */
   double iter_busy;   /* this rank's busy seconds in the last iteration (outside MPI) */
   uint64_t migrate_seed; /* test hook HRAD_TEST_MIGRATE=SEED: new random owners every iteration */
