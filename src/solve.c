@@ -425,6 +425,7 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
   update_unit(s);
   double td = hr_now();
   s->iter_busy = (td - ta) - (mpi_secs(s) - ma);
+  s->iter_wall = td - ta;
   s->mpi_t[1] += mb - ma, s->mpi_t[2] += mc - mb, s->mpi_t[3] += mpi_secs(s) - mc;
   s->t.refine += tb - ta;
   s->t.gather += tc - tb;
@@ -489,13 +490,17 @@ static hr_status test_migrate(hr_solver *s, hr_err *err);
 /* The paper's trigger (2.2.5): balance when the last iteration's idle time, 1 - mean / max of
  * the ranks' busy seconds, exceeds the threshold, and the graph grew since the last balancing
  * (measured: on a busy machine idle time alone fired 10 times in a 46-iteration room run, 7 of
- * them finding nothing better to move to). A collective in distributed runs. */
+ * them finding nothing better to move to), and the time that idleness would lose over the
+ * iterations left is more than the last balancing took (museum at 2 ranks: 2-3 s a balancing,
+ * 5-7 of them a run without this). A collective in distributed runs. */
 static hr_status maybe_balance(hr_solver *s, hr_err *err) {
   if (!s->dist || s->bal_method == HR_BALANCE_NONE) return HR_OK;
-  double v[2] = {s->iter_busy, s->iter_busy};
-  hr_dist_max_f64(s->dist, v, 1);
-  hr_dist_sum_f64(s->dist, v + 1, 1);
-  const double idle = v[0] > 0 ? 1 - v[1] / s->nranks / v[0] : 0;
+  double v[4] = {s->iter_busy, s->iter_wall * hr_solver_iters_left(s), s->t_bal_last,
+                 s->iter_busy};
+  hr_dist_max_f64(s->dist, v, 3);
+  hr_dist_sum_f64(s->dist, v + 3, 1);
+  const double idle = v[0] > 0 ? 1 - v[3] / s->nranks / v[0] : 0;
+  if (idle * v[1] <= v[2]) return HR_OK;
   /* the graph changes only by refinement: the same graph would give the same partition */
   const int kept = s->nbalance - s->nmoved;
   const double growth =
@@ -528,6 +533,13 @@ static double schedule_done(const hr_solver *s) {
   double lf = log(o->bf_factor), total = log(o->bf_start / o->bf_low) / lf + 1;
   double passed = log(o->bf_start / s->bf_e) / lf;
   return total > 0 ? fmin(fmax(passed / total, 0), 1) : 0;
+}
+
+double hr_solver_iters_left(const hr_solver *s) {
+  /* the schedule's share alone errs long in the first level of BF_e, which iterates to
+   * convergence (museum: 19 -> 399 left over its first 21 iterations): no more than done */
+  const double f = fmax(schedule_done(s), 0.05);
+  return fmin(s->iterations * (1 - f) / f, s->iterations);
 }
 
 hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {

@@ -161,6 +161,9 @@ struct hr_solver {
   int bal_last;       /* the iteration after which it last balanced */
   int64_t bal_links;  /* the link count (all ranks) then */
   double iter_busy;   /* this rank's busy seconds in the last iteration (outside MPI) */
+  double iter_wall;   /* wall seconds of the last iteration (balance.c's migration gate) */
+  double t_migrate;   /* seconds the last migration took (rank 0), 0 before the first */
+  double t_bal_last;  /* seconds the last balancing took on this rank (with its migration) */
   uint64_t migrate_seed; /* test hook HRAD_TEST_MIGRATE=SEED: new random owners every iteration */
   /* Test hook (HRAD_TEST_FAIL=RANK:PHASE:ITER, read by hr_solver_set_dist): rank 'fail_rank'
    * fails with "out of memory" in phase fail_phase (HR_PHASE_*) of iteration fail_iter. */
@@ -185,6 +188,9 @@ int32_t hr_owner_of(const hr_solver *s, uint64_t gid);
 hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err);
 /* The reported counts (links, rays, initial links) summed over the ranks: a collective. */
 void hr_solver_sync_counts(hr_solver *s);
+/* The iterations the run has left, estimated from the share of the BF_e schedule done so far,
+ * and at most as many as are done (a cautious guess for what a balancing can earn back). */
+double hr_solver_iters_left(const hr_solver *s);
 
 /* elem.c */
 hr_status hr_elem_init(hr_solver *s);                  /* one root per surface, idx == surface */
