@@ -282,7 +282,7 @@ static hr_status gather_graph(hr_solver *s, bgraph *g, hr_err *err) {
  * alone, 4 of 6 balancings migrated (each 0.3 s or more, and the iterations after it slower
  * while ghosts are fetched anew), late in the run when little was left to gain. */
 static int worth_moving(const hr_solver *s, double z_now, double z_new) {
-  if (s->t_migrate <= 0 || !(z_now > 0)) return 1;
+  if (s->t_migrate <= 0 || !(z_now > 0) || s->bal_idle == 0) return 1; /* idle 0: always */
   const double saving = (1 - z_new / z_now) * s->iter_wall * hr_solver_iters_left(s);
   return saving > s->t_migrate;
 }

@@ -500,7 +500,7 @@ static hr_status maybe_balance(hr_solver *s, hr_err *err) {
   hr_dist_max_f64(s->dist, v, 3);
   hr_dist_sum_f64(s->dist, v + 3, 1);
   const double idle = v[0] > 0 ? 1 - v[3] / s->nranks / v[0] : 0;
-  if (idle * v[1] <= v[2]) return HR_OK;
+  if (s->bal_idle > 0 && idle * v[1] <= v[2]) return HR_OK; /* 0: whatever it costs */
   /* the graph changes only by refinement: the same graph would give the same partition */
   const int kept = s->nbalance - s->nmoved;
   const double growth =
