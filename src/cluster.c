@@ -618,18 +618,19 @@ static int cmp_scan_rec(const void *a, const void *b) {
  * distinct over all ranks) and values v[i]; ex[i] gets the sum of v over the items of every
  * rank with smaller keys, '*tot' the sum over all. The range of the keys is cut into P equal
  * parts, each summed on one rank: two personalised exchanges and two small reductions, nothing
- * beyond the first reduction when no rank has an item. '*any' gets whether 'flag' is set on some
- * rank. A collective; 'st' is this rank's status so far, and every rank returns the same. */
+ * beyond the first reduction when no rank has an item. '*any' gets the bits of 'flags' (two)
+ * set on some rank. A collective; 'st' is this rank's status so far, and every rank returns the
+ * same. */
 static hr_status scan(hr_solver *s, const int64_t *key, const int64_t *v, int64_t n, int64_t *ex,
-                      int64_t *tot, int flag, int *any, hr_status st, hr_err *err) {
+                      int64_t *tot, int flags, int *any, hr_status st, hr_err *err) {
   const int P = s->nranks, me = s->rank;
   *tot = 0;
-  int64_t hdr[5] = {st != HR_OK, n > 0, flag != 0, n > 0 ? -key[0] : -INT64_MAX,
+  int64_t hdr[6] = {st != HR_OK, n > 0, flags & 1, flags & 2, n > 0 ? -key[0] : -INT64_MAX,
                     n > 0 ? key[n - 1] : -1};
-  hr_dist_max_i64(s->dist, hdr, 5);
-  *any = hdr[2] > 0;
+  hr_dist_max_i64(s->dist, hdr, 6);
+  *any = (int)(hdr[2] | hdr[3]);
   if ((st = agreed(st, hdr[0] > 0, err)) != HR_OK || hdr[1] == 0) return st;
-  const int64_t kmin = -hdr[3], W = (hdr[4] - kmin) / P + 1; /* rank p: [kmin + p W, + W) */
+  const int64_t kmin = -hdr[4], W = (hdr[5] - kmin) / P + 1; /* rank p: [kmin + p W, + W) */
   int64_t *sb = calloc((size_t)P, sizeof *sb), *all = calloc((size_t)P + 1, sizeof *all);
   if (!sb || !all) hr_dist_abort(s->dist, 1); /* every rank must take part in the exchanges */
   scan_rec *out = malloc((size_t)(n > 0 ? n : 1) * sizeof *out);
@@ -928,22 +929,25 @@ static int kid_count(const clink *l, int dec) {
 
 /* Distributed refinement, after the decisions dec[0, n) of this rank's links cur (places pos):
  * ex[i], for a link that splits, the place of its first child among the next round's links
- * (the children of all ranks' links, in place order); '*tot' their count, '*elem' whether some
- * link of some rank becomes an element link. A collective (see scan); '*ex' is allocated. */
+ * (the children of all ranks' links, in place order); '*tot' their count; '*what' whether some
+ * link of some rank becomes an element link (ELEM_LINKS) and whether some rank opens an element
+ * that has no children yet (ELEM_SPLITS). A collective (see scan); '*ex' is allocated. */
+enum { ELEM_LINKS = 1, ELEM_SPLITS = 2 };
 static hr_status places(hr_solver *s, const clink *cur, const int64_t *pos, int64_t n,
-                        const uint8_t *dec, int64_t **ex, int64_t *tot, int *elem, hr_status st,
+                        const uint8_t *dec, int64_t **ex, int64_t *tot, int *what, hr_status st,
                         hr_err *err) {
   int64_t *k = malloc((size_t)(n > 0 ? n : 1) * sizeof *k);
   int64_t *v = malloc((size_t)(n > 0 ? n : 1) * sizeof *v);
   int64_t *e = malloc((size_t)(n > 0 ? n : 1) * sizeof *e), m = 0;
   *ex = malloc((size_t)(n > 0 ? n : 1) * sizeof **ex);
   if (st == HR_OK && (!k || !v || !e || !*ex)) st = nomem(err);
-  int el = 0;
+  int fl = 0;
   for (int64_t i = 0; i < n && st == HR_OK; i++) {
-    el |= dec[i] == C_ELEM;
+    const int32_t id = dec[i] == C_SPLIT_R ? cur[i].r : dec[i] == C_SPLIT_S ? cur[i].s : -1;
+    fl |= (dec[i] == C_ELEM ? ELEM_LINKS : 0) | (id >= 0 && s->el[id].child < 0 ? ELEM_SPLITS : 0);
     if (kid_count(&cur[i], dec[i]) > 0) k[m] = pos[i], v[m++] = kid_count(&cur[i], dec[i]);
   }
-  st = scan(s, k, v, st == HR_OK ? m : 0, e, tot, el, elem, st, err);
+  st = scan(s, k, v, st == HR_OK ? m : 0, e, tot, fl, what, st, err);
   for (int64_t i = 0, j = 0; i < n && st == HR_OK; i++)
     if (kid_count(&cur[i], dec[i]) > 0) (*ex)[i] = e[j++];
   free(k), free(v), free(e);
@@ -987,7 +991,7 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
     uint8_t *dec = malloc((size_t)(ncur > 0 ? ncur : 1));
     int64_t(*cnt)[3] = calloc((size_t)nch + 1, sizeof *cnt); /* keep, element, kids */
     int64_t *ex = NULL, tot = 0;
-    int elem = 0;
+    int what = 0;
     if (st == HR_OK && (!dec || !cnt)) st = HR_ERR_NOMEM;
     if (!dist && st != HR_OK) {
       free(dec), free(cnt);
@@ -1008,7 +1012,7 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
       for (int64_t c = 0; c < nch; c++)
         for (int k = 0; k < 3; k++) cnt[c + 1][k] += cnt[c][k];
     }
-    if (dist && (st = places(s, cur, cpos, ncur, dec, &ex, &tot, &elem, st, err)) != HR_OK) {
+    if (dist && (st = places(s, cur, cpos, ncur, dec, &ex, &tot, &what, st, err)) != HR_OK) {
       free(dec), free(cnt), free(ex);
       break;
     }
@@ -1021,7 +1025,7 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
         if (id >= 0 && s->el[id].child < 0) st = hr_elem_subdivide(s, id);
       }
       if (s->nel > nel0) hr_elem_open(s, nel0, s->nel);
-    } else if (tot > 0 && (st = split_dist(s, cur, ncur, dec, err)) != HR_OK) {
+    } else if ((what & ELEM_SPLITS) && (st = split_dist(s, cur, ncur, dec, err)) != HR_OK) {
       free(dec), free(cnt), free(ex);
       break;
     }
@@ -1075,7 +1079,7 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
     cur = next, cpos = npos;
     ncur = st == HR_OK ? nkids : 0;
     if (!dist) continue;
-    if (tot == 0 && !elem) break; /* every rank: no children, no element links anywhere */
+    if (tot == 0 && !(what & ELEM_LINKS)) break; /* every rank: no children, no new links */
     /* the children to their receivers' owners; subscriptions of their ghost sources and of the
      * new element links' */
     if ((st = route(s, &cur, &cpos, &ncur, st, err)) != HR_OK) break;
