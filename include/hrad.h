@@ -327,8 +327,8 @@ hr_status hr_solver_set_progress(hr_solver *s, hr_progress_fn fn, void *ud);
  * own use; can't fail. */
 void hr_solver_progress_report(const hr_solver *s, hr_phase phase, double fraction);
 void hr_solver_stats(const hr_solver *s, hr_stats *st);
-/* 1 if the solver clusters (hr_options.cluster; decided at creation). Clustering does not yet
- * run over several processes (hr_solver_set_dist refuses it). */
+/* 1 if the solver clusters (hr_options.cluster; decided at creation), in one process or over
+ * several. */
 int hr_solver_clustered(const hr_solver *s);
 
 /* Writes the solver's state at an iteration boundary (from the iteration callback, or after

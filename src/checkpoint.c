@@ -199,8 +199,16 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
                      : hr_err_set(err, HR_ERR_NOMEM, "out of memory writing %s", path);
   if (s->dist && (st = hr_dist_agree(s, st, err)) == HR_OK) st = gather_links(s, &lb, &lbytes, err);
   if (s->dist && st == HR_OK) st = gather_links(s, &eb, &ebytes, err);
+  /* the cluster links in the solver's order (its gather sums in that order): in a distributed
+   * run everybody's, on rank 0, in the order they would have in one process */
+  uint64_t *cids = NULL;
+  float *cvals = NULL;
+  int64_t ncl = 0;
+  if (st == HR_OK && (st = hr_cluster_export(s, &cids, &cvals, &ncl)) != HR_OK)
+    st = st == HR_ERR_REMOTE ? hr_err_set(err, st, "stopped: another rank failed")
+                             : hr_err_set(err, HR_ERR_NOMEM, "out of memory writing %s", path);
   if (st != HR_OK || s->rank != 0) {
-    free(lb), free(eb);
+    free(lb), free(eb), free(cids), free(cvals);
     return st;
   }
   /* Canonical orders: gid for elements, (receiver gid, source gid, offset) for the live
@@ -212,13 +220,6 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
     link_rec r;
     memcpy(&r, lb + o, sizeof r);
     o += (int64_t)sizeof r + 4 * (int64_t)(r.ncand > 0 ? r.ncand : 0);
-  }
-  uint64_t *cids = NULL;
-  float *cvals = NULL;
-  int64_t ncl = 0;
-  if (hr_cluster_export(s, &cids, &cvals, &ncl) != HR_OK) {
-    free(eb), free(lb);
-    return hr_err_set(err, HR_ERR_NOMEM, "out of memory writing %s", path);
   }
   uint64_t(*lk)[3] = malloc((size_t)(nl > 0 ? nl : 1) * sizeof *lk);
   char tmp[4200];

@@ -24,6 +24,7 @@
  *    its surfaces' radiosities; else the larger cluster opens. Two surfaces make an element
  *    link (link.c) and refine from then on as elements do. */
 #include "cluster.h"
+#include "mpi/dist.h"
 #include "solver_impl.h"
 #include "vec.h"
 
@@ -68,6 +69,10 @@ struct hr_clusters {
   int initial;        /* before the first pull: reference radiosities are the floor */
   clink *links;
   int64_t nlinks;
+  /* Distributed runs (NULL in one process): per link, its place in the order the links would
+   * have in one process, ascending (see "distribution" below); the next unused place. */
+  int64_t *pos;
+  int64_t vnext;
 };
 
 const double hr_sh_alpha[9] = {M_PI, 2 * M_PI / 3, 2 * M_PI / 3, 2 * M_PI / 3, M_PI / 4,
@@ -511,6 +516,284 @@ static void estimate(const hr_solver *s, clink *l, int weak, int64_t *rays) {
   }
 }
 
+/* ---------------------------------------------------------------- distribution
+ *
+ * Over several ranks (docs/design.md, "Clustering"): the hierarchy and the clusters' state
+ * (Bm, bhi, blo, bref) are replicated, computed alike on every rank from the roots, which every
+ * rank holds (push-pull shares what the pull reads of them). Each cluster link lives on the rank
+ * that owns its receiver: an element's owner, or for a cluster a rank drawn from its number.
+ * The gather sums each receiver's links in the order they would have in one process, so every
+ * link carries a place, a key of that order ('pos'): in one process, refinement keeps the links
+ * of its first round in their order and appends each later round's kept links, and a round's
+ * links are the children of the one before, in their parents' order. So a kept link keeps its
+ * place, and each round's children take new places above all earlier ones (vnext, the same on
+ * every rank), in their parents' order: from prefix sums of the children counts of the links
+ * that split, over all ranks in place order (scan). The clusters' fields are summed over the
+ * ranks (each written by one, zeros elsewhere), so every rank pushes them down alike and adds
+ * what reaches its own roots. */
+
+/* The rank that holds the links node 'id' receives (0 in one process). */
+static int node_owner(const hr_solver *s, int32_t id) {
+  if (!s->dist) return 0;
+  if (id >= 0) return s->eown[id];
+  const uint64_t h = hr_hash4(UINT64_C(0x636c7573746572), (uint64_t)(-1 - id), 0, 0);
+  return (int)(h % (uint64_t)s->nranks);
+}
+
+/* A cluster link between ranks: node ids (node_gid), its place, its eight floats. */
+typedef struct msg_clink {
+  uint64_t r, s;
+  int64_t pos;
+  float v[8];
+} msg_clink;
+
+static msg_clink pack(const hr_solver *s, const clink *l, int64_t pos) {
+  msg_clink m = {node_gid(s, l->r), node_gid(s, l->s), pos,
+                 {l->F, l->kf, l->d[0], l->d[1], l->d[2], l->fb, l->kv, l->fu2}};
+  return m;
+}
+
+static clink link_of(int32_t r, int32_t sn, const float *v) {
+  return (clink){r, sn, v[0], v[1], {v[2], v[3], v[4]}, v[5], v[6], v[7]};
+}
+
+/* The node of id g (node_gid's inverse), or INT32_MIN for an id that names no node; an element
+ * this rank does not hold is made (a ghost) when 'make' (*st = HR_ERR_NOMEM when it cannot be),
+ * else INT32_MIN. */
+static int32_t node_here(hr_solver *s, uint64_t g, int make, hr_status *st) {
+  if (g >> 63) {
+    const uint64_t c = g & ~(UINT64_C(1) << 63);
+    return c < (uint64_t)s->cl->n ? -1 - (int32_t)c : INT32_MIN;
+  }
+  const int32_t e = make ? hr_elem_ensure(s, g) : hr_elem_find(s, g);
+  if (e == -2) *st = HR_ERR_NOMEM;
+  return e >= 0 ? e : INT32_MIN;
+}
+
+/* The local link of message m: its receiver must be an own node here, its source is made a
+ * ghost where this rank holds none. HR_OK, HR_ERR_NOMEM or HR_ERR_INVALID. */
+static hr_status unpack(hr_solver *s, const msg_clink *m, clink *l) {
+  hr_status st = HR_OK;
+  const int32_t r = node_here(s, m->r, 0, &st);
+  const int32_t sn = r == INT32_MIN ? INT32_MIN : node_here(s, m->s, 1, &st);
+  if (st != HR_OK) return st;
+  if (r == INT32_MIN || sn == INT32_MIN || node_owner(s, r) != s->rank) return HR_ERR_INVALID;
+  *l = link_of(r, sn, m->v);
+  return HR_OK;
+}
+
+/* The status every rank returns after a collective step: 'st' here, HR_ERR_REMOTE (with its
+ * message) where another rank failed. */
+static hr_status agreed(hr_status st, int any_failed, hr_err *err) {
+  if (st != HR_OK) return st;
+  return any_failed ? hr_err_set(err, HR_ERR_REMOTE, "stopped: another rank failed") : HR_OK;
+}
+
+static hr_status nomem(hr_err *err) {
+  return hr_err_set(err, HR_ERR_NOMEM, "out of memory in cluster refinement");
+}
+
+/* A personalised exchange (hr_dist_alltoall_st) with this rank's status 'st'; its result's
+ * status as every rank sees it. */
+static hr_status xchg(const hr_solver *s, const void *out, int64_t *sb, hr_status st, void **in,
+                      int64_t *nin, hr_err *err) {
+  *in = NULL, *nin = 0;
+  if (st != HR_OK) memset(sb, 0, (size_t)s->nranks * sizeof *sb);
+  const hr_status xs = hr_dist_alltoall_st(s->dist, out, sb, st != HR_OK, in, nin);
+  if (st != HR_OK) return st;
+  if (xs == HR_ERR_REMOTE) return hr_err_set(err, xs, "stopped: another rank failed");
+  return xs == HR_OK ? HR_OK : nomem(err);
+}
+
+typedef struct scan_rec {
+  int64_t key, v, from;
+} scan_rec;
+
+static int cmp_scan_rec(const void *a, const void *b) {
+  const scan_rec *x = a, *y = b;
+  return x->key < y->key ? -1 : x->key > y->key;
+}
+
+/* Prefix sums in key order over all ranks: this rank's n items with keys key[0, n) (ascending;
+ * distinct over all ranks) and values v[i]; ex[i] gets the sum of v over the items of every
+ * rank with smaller keys, '*tot' the sum over all. The range of the keys is cut into P equal
+ * parts, each summed on one rank: two personalised exchanges and two small reductions, nothing
+ * beyond the first reduction when no rank has an item. '*any' gets the bits of 'flags' (two)
+ * set on some rank. A collective; 'st' is this rank's status so far, and every rank returns the
+ * same. */
+static hr_status scan(hr_solver *s, const int64_t *key, const int64_t *v, int64_t n, int64_t *ex,
+                      int64_t *tot, int flags, int *any, hr_status st, hr_err *err) {
+  const int P = s->nranks, me = s->rank;
+  *tot = 0;
+  int64_t hdr[6] = {st != HR_OK, n > 0, flags & 1, flags & 2, n > 0 ? -key[0] : -INT64_MAX,
+                    n > 0 ? key[n - 1] : -1};
+  hr_dist_max_i64(s->dist, hdr, 6);
+  *any = (int)(hdr[2] | hdr[3]);
+  if ((st = agreed(st, hdr[0] > 0, err)) != HR_OK || hdr[1] == 0) return st;
+  const int64_t kmin = -hdr[4], W = (hdr[5] - kmin) / P + 1; /* rank p: [kmin + p W, + W) */
+  int64_t *sb = calloc((size_t)P, sizeof *sb), *all = calloc((size_t)P + 1, sizeof *all);
+  if (!sb || !all) hr_dist_abort(s->dist, 1); /* every rank must take part in the exchanges */
+  scan_rec *out = malloc((size_t)(n > 0 ? n : 1) * sizeof *out);
+  if (!out) st = nomem(err);
+  for (int64_t i = 0; i < n && st == HR_OK; i++) { /* ascending keys: grouped by rank */
+    out[i] = (scan_rec){key[i], v[i], me};
+    sb[(key[i] - kmin) / W] += (int64_t)sizeof *out;
+  }
+  void *in = NULL;
+  int64_t nb = 0;
+  st = xchg(s, out, sb, st, &in, &nb, err);
+  free(out);
+  if (st != HR_OK) {
+    free(sb), free(all);
+    return st;
+  }
+  /* this rank's part: its items in key order, each with its index in 'in' */
+  const int64_t nin = nb / (int64_t)sizeof(scan_rec);
+  const scan_rec *rin = in;
+  scan_rec *srt = malloc((size_t)(nin > 0 ? nin : 1) * sizeof *srt);
+  int64_t *ans = malloc((size_t)(nin > 0 ? nin : 1) * sizeof *ans), acc = 0;
+  if (srt && ans) {
+    for (int64_t i = 0; i < nin; i++) srt[i] = (scan_rec){rin[i].key, rin[i].v, i};
+    qsort(srt, (size_t)nin, sizeof *srt, cmp_scan_rec);
+    for (int64_t i = 0; i < nin; i++) ans[srt[i].from] = acc, acc += srt[i].v;
+  }
+  all[0] = !srt || !ans;
+  all[1 + me] = acc;
+  hr_dist_sum_i64(s->dist, all, (int64_t)P + 1);
+  st = agreed(all[0] && (!srt || !ans) ? nomem(err) : HR_OK, all[0] > 0, err);
+  int64_t off = 0;
+  for (int p = 0; p < P; p++) off += p < me ? all[1 + p] : 0, *tot += all[1 + p];
+  /* the answers go back in the order the questions came (by rank, each rank's in its order) */
+  memset(sb, 0, (size_t)P * sizeof *sb);
+  for (int64_t i = 0; i < nin && st == HR_OK; i++) {
+    ans[i] += off;
+    sb[rin[i].from] += (int64_t)sizeof *ans;
+  }
+  free(srt), free(in);
+  if (all[0] == 0) { /* every rank got this far */
+    st = xchg(s, ans, sb, st, &in, &nb, err);
+    assert(st != HR_OK || nb == n * (int64_t)sizeof *ans);
+    if (st == HR_OK && n > 0) memcpy(ex, in, (size_t)n * sizeof *ex);
+    free(in);
+  }
+  free(ans), free(sb), free(all);
+  return st;
+}
+
+typedef struct placed {
+  int64_t pos;
+  clink l;
+} placed;
+
+static int cmp_placed(const void *a, const void *b) {
+  const placed *x = a, *y = b;
+  return x->pos < y->pos ? -1 : x->pos > y->pos;
+}
+
+/* The links cur[0, n) at places pos whose receivers other ranks own go there; those that arrive
+ * join the others, and all are put in place order. A collective; 'st' is this rank's status so
+ * far, and every rank returns the same status. */
+static hr_status route(hr_solver *s, clink **pcur, int64_t **ppos, int64_t *pn, hr_status st,
+                       hr_err *err) {
+  const int P = s->nranks;
+  clink *cur = *pcur;
+  int64_t *pos = *ppos, n = *pn, nstay = 0;
+  int64_t *sb = calloc((size_t)P, sizeof *sb), *at = calloc((size_t)P + 1, sizeof *at);
+  if (!sb) hr_dist_abort(s->dist, 1); /* every rank must take part in the exchange */
+  for (int64_t i = 0; i < n && st == HR_OK; i++) {
+    const int d = node_owner(s, cur[i].r);
+    if (d != s->rank) sb[d] += (int64_t)sizeof(msg_clink);
+  }
+  msg_clink *out = NULL;
+  if (st == HR_OK && at) {
+    for (int p = 0; p < P; p++) at[p + 1] = at[p] + sb[p] / (int64_t)sizeof *out;
+    out = malloc((size_t)(at[P] > 0 ? at[P] : 1) * sizeof *out);
+  }
+  if (st == HR_OK && !out) st = nomem(err);
+  for (int64_t i = 0; i < n && st == HR_OK; i++) {
+    const int d = node_owner(s, cur[i].r);
+    if (d != s->rank) {
+      out[at[d]++] = pack(s, &cur[i], pos[i]);
+    } else {
+      cur[nstay] = cur[i], pos[nstay++] = pos[i];
+    }
+  }
+  if (st == HR_OK) *pn = nstay; /* what was sent is gone from here in any case */
+  void *in = NULL;
+  int64_t nb = 0;
+  st = xchg(s, out, sb, st, &in, &nb, err);
+  free(out), free(sb), free(at);
+  if (st != HR_OK) return st;
+  const int64_t nr = nb / (int64_t)sizeof(msg_clink), nt = nstay + nr;
+  placed *all = malloc((size_t)(nt > 0 ? nt : 1) * sizeof *all);
+  clink *c2 = all ? realloc(cur, (size_t)(nt > 0 ? nt : 1) * sizeof *c2) : NULL;
+  if (c2) cur = *pcur = c2;
+  int64_t *p2 = c2 ? realloc(pos, (size_t)(nt > 0 ? nt : 1) * sizeof *p2) : NULL;
+  if (p2) pos = *ppos = p2;
+  st = p2 ? HR_OK : HR_ERR_NOMEM;
+  for (int64_t i = 0; i < nstay && st == HR_OK; i++) all[i] = (placed){pos[i], cur[i]};
+  for (int64_t i = 0; i < nr && st == HR_OK; i++) {
+    msg_clink m;
+    memcpy(&m, (const char *)in + i * (int64_t)sizeof m, sizeof m);
+    all[nstay + i].pos = m.pos;
+    st = unpack(s, &m, &all[nstay + i].l);
+  }
+  free(in);
+  if (st == HR_OK) {
+    qsort(all, (size_t)nt, sizeof *all, cmp_placed);
+    for (int64_t i = 0; i < nt; i++) cur[i] = all[i].l, pos[i] = all[i].pos;
+    *pn = nt;
+  }
+  free(all);
+  if (st == HR_ERR_INVALID) st = hr_err_set(err, st, "internal error: a cluster link astray");
+  else if (st != HR_OK) st = nomem(err);
+  return hr_dist_agree(s, st, err);
+}
+
+/* The ghost elements among the sources of links l[0, n) that this rank has not subscribed to
+ * yet, into a new array '*out' (may repeat one). */
+static hr_status ghost_sources(const hr_solver *s, const clink *l, int64_t n, int32_t **out,
+                               int64_t *nout) {
+  int64_t m = 0;
+  for (int64_t i = 0; i < n; i++) m += l[i].s >= 0 && !hr_owns(s, l[i].s) && !s->esub[l[i].s];
+  *nout = 0;
+  *out = malloc((size_t)(m > 0 ? m : 1) * sizeof **out);
+  if (!*out) return HR_ERR_NOMEM;
+  for (int64_t i = 0; i < n; i++)
+    if (l[i].s >= 0 && !hr_owns(s, l[i].s) && !s->esub[l[i].s]) (*out)[(*nout)++] = l[i].s;
+  return HR_OK;
+}
+
+hr_status hr_cluster_sources(const hr_solver *s, int32_t **out, int64_t *n) {
+  *out = NULL, *n = 0;
+  if (!s->cl) return HR_OK;
+  return ghost_sources(s, s->cl->links, s->cl->nlinks, out, n);
+}
+
+hr_status hr_cluster_migrate(hr_solver *s, hr_err *err) {
+  hr_clusters *cl = s->cl;
+  if (!cl || !s->dist) return HR_OK;
+  return route(s, &cl->links, &cl->pos, &cl->nlinks, HR_OK, err);
+}
+
+void hr_cluster_keep(const hr_solver *s, uint8_t *keep) {
+  const hr_clusters *cl = s->cl;
+  for (int64_t i = 0; cl && i < cl->nlinks; i++) {
+    if (cl->links[i].r >= 0) keep[cl->links[i].r] |= 1;
+    if (cl->links[i].s >= 0) keep[cl->links[i].s] |= 1;
+  }
+}
+
+void hr_cluster_renumber(hr_solver *s, const int32_t *nu) {
+  hr_clusters *cl = s->cl;
+  for (int64_t i = 0; cl && i < cl->nlinks; i++) {
+    clink *l = &cl->links[i];
+    assert((l->r < 0 || nu[l->r] >= 0) && (l->s < 0 || nu[l->s] >= 0)); /* kept: keep() */
+    if (l->r >= 0) l->r = nu[l->r];
+    if (l->s >= 0) l->s = nu[l->s];
+  }
+}
+
 /* ---------------------------------------------------------------- refinement */
 
 /* Decisions; C_WEAK keeps a link that brings at most a quarter of the error allowed (its
@@ -644,55 +927,125 @@ static int kid_count(const clink *l, int dec) {
  * per-link output array is needed. */
 #define CHUNK 4096
 
+/* Distributed refinement, after the decisions dec[0, n) of this rank's links cur (places pos):
+ * ex[i], for a link that splits, the place of its first child among the next round's links
+ * (the children of all ranks' links, in place order); '*tot' their count; '*what' whether some
+ * link of some rank becomes an element link (ELEM_LINKS) and whether some rank opens an element
+ * that has no children yet (ELEM_SPLITS). A collective (see scan); '*ex' is allocated. */
+enum { ELEM_LINKS = 1, ELEM_SPLITS = 2 };
+static hr_status places(hr_solver *s, const clink *cur, const int64_t *pos, int64_t n,
+                        const uint8_t *dec, int64_t **ex, int64_t *tot, int *what, hr_status st,
+                        hr_err *err) {
+  int64_t *k = malloc((size_t)(n > 0 ? n : 1) * sizeof *k);
+  int64_t *v = malloc((size_t)(n > 0 ? n : 1) * sizeof *v);
+  int64_t *e = malloc((size_t)(n > 0 ? n : 1) * sizeof *e), m = 0;
+  *ex = malloc((size_t)(n > 0 ? n : 1) * sizeof **ex);
+  if (st == HR_OK && (!k || !v || !e || !*ex)) st = nomem(err);
+  int fl = 0;
+  for (int64_t i = 0; i < n && st == HR_OK; i++) {
+    const int32_t id = dec[i] == C_SPLIT_R ? cur[i].r : dec[i] == C_SPLIT_S ? cur[i].s : -1;
+    fl |= (dec[i] == C_ELEM ? ELEM_LINKS : 0) | (id >= 0 && s->el[id].child < 0 ? ELEM_SPLITS : 0);
+    if (kid_count(&cur[i], dec[i]) > 0) k[m] = pos[i], v[m++] = kid_count(&cur[i], dec[i]);
+  }
+  st = scan(s, k, v, st == HR_OK ? m : 0, e, tot, fl, what, st, err);
+  for (int64_t i = 0, j = 0; i < n && st == HR_OK; i++)
+    if (kid_count(&cur[i], dec[i]) > 0) (*ex)[i] = e[j++];
+  free(k), free(v), free(e);
+  return st;
+}
+
+/* Distributed refinement: the elements that open (own ones, and ghosts, which their owners
+ * split too; hr_link_split_marked). A collective. */
+static hr_status split_dist(hr_solver *s, const clink *cur, int64_t n, const uint8_t *dec,
+                            hr_err *err) {
+  uint8_t *mark = calloc((size_t)s->nel + 1, 1);
+  hr_status st = hr_dist_agree(s, mark ? HR_OK : nomem(err), err);
+  if (st == HR_OK) {
+    for (int64_t i = 0; i < n; i++) {
+      const int32_t id = dec[i] == C_SPLIT_R ? cur[i].r : dec[i] == C_SPLIT_S ? cur[i].s : -1;
+      if (id >= 0 && s->el[id].child < 0) mark[id] = 1;
+    }
+    st = hr_link_split_marked(s, mark, s->nel, err);
+  }
+  free(mark);
+  return st;
+}
+
 hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
   hr_clusters *cl = s->cl;
   if (!cl) return HR_OK;
+  const int dist = s->dist != NULL;
   int64_t ncur = cl->nlinks, nout = 0, cap_out = ncur > 16 ? ncur : 16;
   clink *cur = cl->links, *out = malloc((size_t)cap_out * sizeof *out);
-  cl->links = NULL, cl->nlinks = 0;
-  hr_status st = out ? HR_OK : HR_ERR_NOMEM;
+  /* distributed: the places of cur's and out's links */
+  int64_t *cpos = cl->pos, *opos = dist ? malloc((size_t)cap_out * sizeof *opos) : NULL;
+  cl->links = NULL, cl->pos = NULL, cl->nlinks = 0;
+  hr_status st = out && (!dist || opos) ? HR_OK : HR_ERR_NOMEM;
   int64_t rays = 0, made = 0;
-  while (st == HR_OK && ncur > 0) {
+  /* the test hook HRAD_TEST_FAIL=RANK:cluster:ITER: this rank fails within the first round */
+  int injected = hr_test_fail(s, HR_PHASE_CLUSTER);
+  /* one process: until no link splits; distributed: until none does on any rank, every rank
+   * taking part in every round's exchanges */
+  while (dist || (st == HR_OK && ncur > 0)) {
     const int64_t nch = (ncur + CHUNK - 1) / CHUNK;
-    uint8_t *dec = malloc((size_t)ncur);
+    uint8_t *dec = malloc((size_t)(ncur > 0 ? ncur : 1));
     int64_t(*cnt)[3] = calloc((size_t)nch + 1, sizeof *cnt); /* keep, element, kids */
-    if (!dec || !cnt) {
+    int64_t *ex = NULL, tot = 0;
+    int what = 0;
+    if (st == HR_OK && (!dec || !cnt)) st = HR_ERR_NOMEM;
+    if (!dist && st != HR_OK) {
       free(dec), free(cnt);
-      st = HR_ERR_NOMEM;
       break;
     }
+    if (st == HR_OK) {
 #pragma omp parallel for schedule(dynamic, 1) if (nch > 1) num_threads(s->threads)
-    for (int64_t c = 0; c < nch; c++) {
-      const int64_t hi = (c + 1) * CHUNK < ncur ? (c + 1) * CHUNK : ncur;
-      for (int64_t i = c * CHUNK; i < hi; i++) {
-        const int d = decide(s, &cur[i], bf_e);
-        dec[i] = (uint8_t)d;
-        cnt[c + 1][0] += d == C_KEEP || d == C_WEAK;
-        cnt[c + 1][1] += d == C_ELEM;
-        cnt[c + 1][2] += kid_count(&cur[i], d);
+      for (int64_t c = 0; c < nch; c++) {
+        const int64_t hi = (c + 1) * CHUNK < ncur ? (c + 1) * CHUNK : ncur;
+        for (int64_t i = c * CHUNK; i < hi; i++) {
+          const int d = decide(s, &cur[i], bf_e);
+          dec[i] = (uint8_t)d;
+          cnt[c + 1][0] += d == C_KEEP || d == C_WEAK;
+          cnt[c + 1][1] += d == C_ELEM;
+          cnt[c + 1][2] += kid_count(&cur[i], d);
+        }
       }
+      for (int64_t c = 0; c < nch; c++)
+        for (int k = 0; k < 3; k++) cnt[c + 1][k] += cnt[c][k];
     }
-    for (int64_t c = 0; c < nch; c++)
-      for (int k = 0; k < 3; k++) cnt[c + 1][k] += cnt[c][k];
+    if (dist && (st = places(s, cur, cpos, ncur, dec, &ex, &tot, &what, st, err)) != HR_OK) {
+      free(dec), free(cnt), free(ex);
+      break;
+    }
     /* elements that open: subdivided here, in increasing link order (the order does not depend
      * on threads), with their children's open fractions */
     const int64_t nel0 = s->nel;
-    for (int64_t i = 0; i < ncur && st == HR_OK; i++) {
-      const int32_t id = dec[i] == C_SPLIT_R ? cur[i].r : dec[i] == C_SPLIT_S ? cur[i].s : -1;
-      if (id >= 0 && s->el[id].child < 0) st = hr_elem_subdivide(s, id);
+    if (!dist) {
+      for (int64_t i = 0; i < ncur && st == HR_OK; i++) {
+        const int32_t id = dec[i] == C_SPLIT_R ? cur[i].r : dec[i] == C_SPLIT_S ? cur[i].s : -1;
+        if (id >= 0 && s->el[id].child < 0) st = hr_elem_subdivide(s, id);
+      }
+      if (s->nel > nel0) hr_elem_open(s, nel0, s->nel);
+    } else if ((what & ELEM_SPLITS) && (st = split_dist(s, cur, ncur, dec, err)) != HR_OK) {
+      free(dec), free(cnt), free(ex);
+      break;
     }
-    if (s->nel > nel0) hr_elem_open(s, nel0, s->nel);
     const int64_t nkeep = cnt[nch][0], nelem = cnt[nch][1], nkids = cnt[nch][2];
+    if (st == HR_OK && injected == 1) st = HR_ERR_NOMEM, injected = 2;
     if (st == HR_OK && nout + nkeep > cap_out) {
       while (cap_out < nout + nkeep) cap_out *= 2;
       clink *o = realloc(out, (size_t)cap_out * sizeof *o);
       if (!o) st = HR_ERR_NOMEM;
       else out = o;
+      int64_t *op = dist && o ? realloc(opos, (size_t)cap_out * sizeof *op) : NULL;
+      if (op) opos = op;
+      else if (dist) st = HR_ERR_NOMEM;
     }
     clink *next = malloc((size_t)(nkids > 0 ? nkids : 1) * sizeof *next);
+    int64_t *npos = dist ? malloc((size_t)(nkids > 0 ? nkids : 1) * sizeof *npos) : NULL;
     hr_link *el = malloc((size_t)(nelem > 0 ? nelem : 1) * sizeof *el);
     uint8_t *eok = calloc((size_t)(nelem > 0 ? nelem : 1), 1);
-    if (st == HR_OK && (!next || !el || !eok)) st = HR_ERR_NOMEM;
+    if (st == HR_OK && (!next || !el || !eok || (dist && !npos))) st = HR_ERR_NOMEM;
+    const int64_t nl0 = s->nlinks;
     if (st == HR_OK) {
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : rays, made) if (nch > 1) \
     num_threads(s->threads)
@@ -711,22 +1064,45 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
           }
         }
       }
+      /* distributed: the places, in the order the loop above wrote the links; a kept link
+       * keeps its own */
+      for (int64_t i = 0, ko = nout, no = 0; dist && i < ncur; i++) {
+        if (dec[i] == C_KEEP || dec[i] == C_WEAK) opos[ko++] = cpos[i];
+        for (int k = 0; k < kid_count(&cur[i], dec[i]); k++) npos[no++] = cl->vnext + ex[i] + k;
+      }
       nout += nkeep;
       st = append_links(s, el, eok, nelem, nnew);
     }
-    free(dec), free(cnt), free(el), free(eok);
-    free(cur);
-    cur = next;
+    cl->vnext += tot;
+    free(dec), free(cnt), free(el), free(eok), free(ex);
+    free(cur), free(cpos);
+    cur = next, cpos = npos;
     ncur = st == HR_OK ? nkids : 0;
+    if (!dist) continue;
+    if (tot == 0 && !(what & ELEM_LINKS)) break; /* every rank: no children, no new links */
+    /* the children to their receivers' owners; subscriptions of their ghost sources and of the
+     * new element links' */
+    if ((st = route(s, &cur, &cpos, &ncur, st, err)) != HR_OK) break;
+    int32_t *src = NULL;
+    int64_t nsrc = 0;
+    if (ghost_sources(s, cur, ncur, &src, &nsrc) != HR_OK) st = nomem(err);
+    st = hr_link_subscribe_new(s, nl0, src, nsrc, st, err);
+    free(src);
+    if (st != HR_OK || tot == 0) break;
   }
-  free(cur);
+  free(cur), free(cpos);
   s->rays += rays;
   *nnew += made;
+  if (st != HR_OK && st != HR_ERR_REMOTE)
+    st = hr_err_set(err, st, "out of memory in cluster refinement%s",
+                    injected == 2 ? " (injected by HRAD_TEST_FAIL)" : "");
+  if (dist) st = hr_dist_agree(s, st, err); /* (a failure in the last round) */
   if (st != HR_OK) {
-    free(out);
-    return hr_err_set(err, st, "out of memory in cluster refinement");
+    free(out), free(opos);
+    return st;
   }
   cl->links = out;
+  cl->pos = opos;
   cl->nlinks = nout;
   return HR_OK;
 }
@@ -762,7 +1138,11 @@ void hr_cluster_gather(hr_solver *s) {
       for (int c = 0; c < NCH; c++) L[c][q] += w * v[c];
     }
   }
-  /* push: preorder, so a parent's field is complete before its children take it */
+  /* distributed: each cluster's field is summed on the rank that holds its links, zeros
+   * elsewhere (x + 0 == x); all of them on every rank */
+  if (s->dist) hr_dist_sum_f64(s->dist, &cl->L[0][0][0], (int64_t)cl->n * NCH * 9);
+  /* push: preorder, so a parent's field is complete before its children take it; every rank
+   * pushes alike and adds what reaches its own roots */
   for (int32_t c = 0; c < cl->n; c++) {
     const cnode *nd = &cl->node[c];
     for (int q = 0; q < 2; q++) {
@@ -773,6 +1153,7 @@ void hr_cluster_gather(hr_solver *s) {
           for (int k = 0; k < 9; k++) L[ch][k] += cl->L[c][ch][k];
         continue;
       }
+      if (!hr_owns(s, id)) continue;
       const hr_vec3 nv = s->scene->surfs[id].normal;
       const double n[3] = {nv.x, nv.y, nv.z};
       double y[9], e[NCH];
@@ -820,74 +1201,107 @@ void hr_cluster_pull(hr_solver *s) {
 
 /* ---------------------------------------------------------------- set-up */
 
-/* s->cl with its hierarchy and room for n links (none yet). */
+/* s->cl with its hierarchy and room for n links (none yet), with their places in distributed
+ * runs. */
 static hr_status create(hr_solver *s, int64_t n) {
   hr_clusters *cl = calloc(1, sizeof *cl);
   if (!cl) return HR_ERR_NOMEM;
   s->cl = cl;
   if (build_tree(s, cl) != HR_OK) return HR_ERR_NOMEM;
   cl->links = malloc((size_t)(n > 0 ? n : 1) * sizeof *cl->links);
-  return cl->links ? HR_OK : HR_ERR_NOMEM;
+  if (s->dist) cl->pos = malloc((size_t)(n > 0 ? n : 1) * sizeof *cl->pos);
+  return cl->links && (!s->dist || cl->pos) ? HR_OK : HR_ERR_NOMEM;
 }
 
 hr_status hr_cluster_init(hr_solver *s, hr_err *err) {
-  if (create(s, 1) != HR_OK)
-    return hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters");
+  hr_status st = create(s, 1);
+  if (st != HR_OK) st = hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters");
+  else if (hr_test_fail(s, HR_PHASE_INIT))
+    st = hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters (injected by "
+                                       "HRAD_TEST_FAIL)");
+  if ((st = hr_dist_agree(s, st, err)) != HR_OK) return st;
   hr_clusters *cl = s->cl;
   hr_cluster_pull(s); /* radiosities: the emission */
   cl->initial = 1;
-  cl->links[0] = fresh(cl->root, cl->root);
-  cl->nlinks = 1;
+  /* the root's self-link, on the rank that holds the root's links, at place 0 */
+  if (node_owner(s, cl->root) == s->rank) {
+    cl->links[0] = fresh(cl->root, cl->root);
+    if (cl->pos) cl->pos[0] = 0;
+    cl->nlinks = 1;
+  }
+  cl->vnext = 1;
   int64_t nnew = 0;
   return hr_cluster_refine(s, s->opt.bf_start, &nnew, err);
+}
+
+static int cmp_msg_pos(const void *a, const void *b) {
+  const msg_clink *x = a, *y = b;
+  return x->pos < y->pos ? -1 : x->pos > y->pos;
 }
 
 hr_status hr_cluster_export(const hr_solver *s, uint64_t **ids, float **vals, int64_t *n) {
   const hr_clusters *cl = s->cl;
   *ids = NULL, *vals = NULL, *n = cl ? cl->nlinks : 0;
-  if (*n == 0) return HR_OK;
+  msg_clink *all = NULL;
+  if (s->dist && cl) { /* everybody's to rank 0, in place order */
+    hr_err e2;
+    const int64_t m = *n;
+    *n = 0;
+    msg_clink *out = malloc((size_t)(m > 0 ? m : 1) * sizeof *out);
+    int64_t *sb = calloc((size_t)s->nranks, sizeof *sb), nb = 0;
+    if (!sb) hr_dist_abort(s->dist, 1); /* every rank must take part in the exchange */
+    for (int64_t i = 0; out && i < m; i++) out[i] = pack(s, &cl->links[i], cl->pos[i]);
+    sb[0] = m * (int64_t)sizeof *out;
+    void *in = NULL;
+    const hr_status st = xchg(s, out, sb, out ? HR_OK : HR_ERR_NOMEM, &in, &nb, &e2);
+    free(out), free(sb);
+    if (st != HR_OK) return st;
+    all = in;
+    *n = nb / (int64_t)sizeof *all;
+    qsort(all, (size_t)*n, sizeof *all, cmp_msg_pos);
+  }
+  if (*n == 0) {
+    free(all);
+    return HR_OK;
+  }
   *ids = malloc((size_t)*n * 2 * sizeof **ids);
   *vals = malloc((size_t)*n * 8 * sizeof **vals);
   if (!*ids || !*vals) {
-    free(*ids), free(*vals);
+    free(*ids), free(*vals), free(all);
     *ids = NULL, *vals = NULL;
     return HR_ERR_NOMEM;
   }
   for (int64_t i = 0; i < *n; i++) {
-    const clink *l = &cl->links[i];
-    (*ids)[2 * i] = node_gid(s, l->r), (*ids)[2 * i + 1] = node_gid(s, l->s);
-    const float v[8] = {l->F, l->kf, l->d[0], l->d[1], l->d[2], l->fb, l->kv, l->fu2};
-    memcpy(*vals + 8 * i, v, sizeof v);
+    const msg_clink m = all ? all[i] : pack(s, &cl->links[i], i);
+    (*ids)[2 * i] = m.r, (*ids)[2 * i + 1] = m.s;
+    memcpy(*vals + 8 * i, m.v, sizeof m.v);
   }
+  free(all);
   return HR_OK;
-}
-
-/* The node of id g (node_gid's inverse), or INT32_MIN. */
-static int32_t node_of(const hr_solver *s, uint64_t g) {
-  if (g >> 63) {
-    const uint64_t c = g & ~(UINT64_C(1) << 63);
-    return c < (uint64_t)s->cl->n ? -1 - (int32_t)c : INT32_MIN;
-  }
-  const int32_t e = hr_elem_find(s, g);
-  return e >= 0 ? e : INT32_MIN;
 }
 
 hr_status hr_cluster_import(hr_solver *s, const uint64_t *ids, const float *vals, int64_t n) {
   hr_status st = create(s, n);
   if (st != HR_OK) return st;
   hr_clusters *cl = s->cl;
+  int64_t k = 0;
   for (int64_t i = 0; i < n; i++) {
-    const int32_t r = node_of(s, ids[2 * i]), sn = node_of(s, ids[2 * i + 1]);
+    const int32_t r = node_here(s, ids[2 * i], 0, &st), sn = node_here(s, ids[2 * i + 1], 0, &st);
     if (r == INT32_MIN || sn == INT32_MIN || (r >= 0 && sn >= 0)) return HR_ERR_PARSE;
-    const float *v = vals + 8 * i;
-    cl->links[i] = (clink){r, sn, v[0], v[1], {v[2], v[3], v[4]}, v[5], v[6], v[7]};
+    if (node_owner(s, r) != s->rank) continue; /* distributed: another rank's */
+    if (cl->pos) cl->pos[k] = i;
+    cl->links[k++] = link_of(r, sn, vals + 8 * i);
   }
-  cl->nlinks = n;
+  cl->nlinks = k;
+  cl->vnext = n;
   hr_cluster_pull(s);
   return HR_OK;
 }
 
 int64_t hr_cluster_links(const hr_solver *s) { return s->cl ? s->cl->nlinks : 0; }
+size_t hr_cluster_link_bytes(const hr_solver *s) {
+  return sizeof(clink) + (s->dist ? sizeof(int64_t) : 0);
+}
 int64_t hr_cluster_count(const hr_solver *s) { return s->cl ? s->cl->n : 0; }
 
 void hr_cluster_free(hr_clusters **pc) {
@@ -895,6 +1309,7 @@ void hr_cluster_free(hr_clusters **pc) {
   if (!cl) return;
   free(cl->node), free(cl->perm), free(cl->cum), free(cl->srad), free(cl->nsh), free(cl->rho);
   free(cl->Bm), free(cl->bhi), free(cl->blo), free(cl->bref), free(cl->L), free(cl->links);
+  free(cl->pos);
   free(cl);
   *pc = NULL;
 }

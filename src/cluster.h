@@ -11,6 +11,7 @@
 
 #include "hrad.h"
 
+#include <stddef.h>
 #include <stdint.h>
 
 typedef struct hr_solver hr_solver;
@@ -26,19 +27,35 @@ hr_status hr_cluster_init(hr_solver *s, hr_err *err);
  * to '*nnew'. New element links make the next hr_link_sort a full one. */
 hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err);
 /* After the element gather: adds what the cluster links bring to G, Gu and Gf of the surface
- * roots (through the clusters' incident fields). */
+ * roots (through the clusters' incident fields). A collective in distributed runs. */
 void hr_cluster_gather(hr_solver *s);
-/* After push-pull: the clusters' radiosities, ranges and reference radiosities from the roots. */
+/* After push-pull: the clusters' radiosities, ranges and reference radiosities from the roots
+ * (in distributed runs every rank's roots are current: push-pull shares them). */
 void hr_cluster_pull(hr_solver *s);
 /* Checkpoints: the cluster links in their order, each as two node ids (an element's gid, or
  * 1 << 63 | cluster) and eight floats; hr_cluster_export allocates both arrays (NULL when
- * there are none). hr_cluster_import builds the hierarchy of a resumed solver and takes the
- * links (elements must exist already); HR_ERR_PARSE for an id that names no node. */
+ * there are none; in distributed runs a collective that brings every rank's links to rank 0,
+ * HR_ERR_REMOTE where another rank failed). hr_cluster_import builds the hierarchy of a resumed
+ * solver and takes the links (elements must exist already; a rank keeps the links whose
+ * receivers it holds the links of); HR_ERR_PARSE for an id that names no node. */
 hr_status hr_cluster_export(const hr_solver *s, uint64_t **ids, float **vals, int64_t *n);
 hr_status hr_cluster_import(hr_solver *s, const uint64_t *ids, const float *vals, int64_t n);
-int64_t hr_cluster_links(const hr_solver *s);
+int64_t hr_cluster_links(const hr_solver *s); /* this rank's */
+size_t hr_cluster_link_bytes(const hr_solver *s); /* what one cluster link takes */
 int64_t hr_cluster_count(const hr_solver *s);
 void hr_cluster_free(hr_clusters **c);
+
+/* Distributed runs (docs/design.md, "Clustering"). A cluster link lives on the rank that owns
+ * its receiver (an element's owner; a cluster's is drawn from its number).
+ * hr_cluster_sources: the ghost sources of this rank's cluster links not subscribed yet, in a
+ * new array. hr_cluster_migrate (a collective): after element owners changed, the links of
+ * elements that moved go to their new owners. hr_cluster_keep marks the elements at the ends of
+ * cluster links in 'keep' (hr_elem_prune); hr_cluster_renumber follows hr_elem_compact's new
+ * indices 'nu'. */
+hr_status hr_cluster_sources(const hr_solver *s, int32_t **out, int64_t *n);
+hr_status hr_cluster_migrate(hr_solver *s, hr_err *err);
+void hr_cluster_keep(const hr_solver *s, uint8_t *keep);
+void hr_cluster_renumber(hr_solver *s, const int32_t *nu);
 
 /* Order-2 real spherical harmonics of the unit vector d (9 values, Ramamoorthi & Hanrahan's
  * ordering: 00, 1-1, 10, 11, 2-2, 2-1, 20, 21, 22). */

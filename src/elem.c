@@ -3,6 +3,7 @@
  * parameter space) and a triangle into 4 triangles at its edge midpoints. An element's corners
  * are integer lattice points of its surface (see hr_leaf in hrad.h), so its geometry follows
  * from (surface, lattice corners) alone, and its global id from (surface, path). */
+#include "cluster.h"
 #include "solver_impl.h"
 #include "vec.h"
 
@@ -305,8 +306,9 @@ void hr_elem_open(hr_solver *s, int64_t lo, int64_t hi) {
 }
 
 /* Keeps the elements with keep[e] != 0 (which must hold every root and whole sibling groups,
- * and be closed under parent), in their order; links, the gid map and the children of kept
- * elements whose children go are renumbered or cut. Subscriptions must be empty. */
+ * and be closed under parent), in their order; links (element and cluster links), the gid map
+ * and the children of kept elements whose children go are renumbered or cut. Subscriptions
+ * must be empty. */
 void hr_elem_compact(hr_solver *s, const uint8_t *keep) {
   int32_t *nu = malloc((size_t)(s->nel > 0 ? s->nel : 1) * sizeof *nu);
   if (!nu) return; /* nothing lost but memory: keep everything */
@@ -333,6 +335,7 @@ void hr_elem_compact(hr_solver *s, const uint8_t *keep) {
     s->links[i].s = nu[s->links[i].s];
     assert(s->links[i].r >= 0 && s->links[i].s >= 0);
   }
+  hr_cluster_renumber(s, nu);
   free(nu);
   s->nel = n;
   memset(s->gkey, 0, (size_t)s->gcap * sizeof *s->gkey);
@@ -346,6 +349,7 @@ void hr_elem_prune(hr_solver *s) {
   if (!keep) return; /* nothing lost but memory */
   for (int64_t e = 0; e < s->nel; e++) keep[e] |= e < s->scene->nsurfs || hr_owns(s, e);
   for (int64_t i = 0; i < s->nlinks; i++) keep[s->links[i].s] = 1;
+  hr_cluster_keep(s, keep); /* the elements at the ends of cluster links */
   for (int64_t e = 0; e < s->nel; e++) /* children of own elements and of sources */
     if (keep[e] && s->el[e].child >= 0)
       for (int k = 0; k < 4; k++) keep[s->el[e].child + k] |= 2;

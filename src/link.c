@@ -484,7 +484,6 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
   int n = sc->nsurfs;
   double pairs = 0.5 * (double)n * (double)(n - 1);
   if (hr_cluster_wanted(&s->opt, n)) {
-    assert(!s->dist); /* hr_solver_set_dist refuses clustering */
     hr_status st = hr_cluster_init(s, err);
     s->initial_links = s->nlinks + hr_cluster_links(s);
     return st;
@@ -725,18 +724,19 @@ static hr_status apply_states(hr_solver *s, const char *in, int64_t nin, hr_stat
   return st;
 }
 
-/* Every ghost source of links[0, n) that this rank has not subscribed to yet subscribes at its
- * owner and gets the owner's state of it now (the paper's "search" and "fetch": a rank decides
- * about a link only with its source's current state, and every later push-pull stores it). A
- * collective. */
-static hr_status subscribe_range(hr_solver *s, const hr_link *links, int64_t nl, hr_err *err) {
+/* Every ghost source of the live links[0, nl) and every ghost elems[0, ne) (sources of cluster
+ * links) that this rank has not subscribed to yet subscribes at its owner and gets the owner's
+ * state of it now (the paper's "search" and "fetch": a rank decides about a link only with its
+ * source's current state, and every later push-pull stores it). A collective; 'st' is this
+ * rank's status so far, and every rank returns the same status. */
+static hr_status subscribe(hr_solver *s, const hr_link *links, int64_t nl, const int32_t *elems,
+                           int64_t ne, hr_status st, hr_err *err) {
   int64_t n = 0, cap = 0;
   msg_sub *rec = NULL;
   int32_t *dest = NULL;
-  hr_status st = HR_OK;
-  for (int64_t i = 0; i < nl && st == HR_OK; i++) {
-    const int32_t j = links[i].s;
-    if (links[i].Fu < 0 || hr_owns(s, j) || s->esub[j]) continue;
+  for (int64_t i = 0; i < nl + ne && st == HR_OK; i++) {
+    const int32_t j = i < nl ? links[i].s : elems[i - nl];
+    if ((i < nl && links[i].Fu < 0) || hr_owns(s, j) || s->esub[j]) continue;
     if (n == cap) {
       cap = cap ? 2 * cap : 1024;
       msg_sub *r2 = realloc(rec, (size_t)cap * sizeof *r2);
@@ -785,9 +785,25 @@ static hr_status subscribe_range(hr_solver *s, const hr_link *links, int64_t nl,
   return hr_dist_agree(s, st, err);
 }
 
+static hr_status subscribe_range(hr_solver *s, const hr_link *links, int64_t nl, hr_err *err) {
+  return subscribe(s, links, nl, NULL, 0, HR_OK, err);
+}
+
 hr_status hr_link_subscribe(hr_solver *s, hr_err *err) {
   if (!s->dist) return HR_OK;
-  return subscribe_range(s, s->links, s->nlinks, err);
+  int32_t *cs = NULL;
+  int64_t ncs = 0;
+  const hr_status st = hr_cluster_sources(s, &cs, &ncs);
+  const hr_status r = subscribe(s, s->links, s->nlinks, cs, ncs,
+                                st == HR_OK ? st : hr_err_set(err, st, "out of memory"), err);
+  free(cs);
+  return r;
+}
+
+hr_status hr_link_subscribe_new(hr_solver *s, int64_t lo, const int32_t *elems, int64_t ne,
+                                hr_status st, hr_err *err) {
+  if (!s->dist) return st;
+  return subscribe(s, s->links + lo, s->nlinks - lo, elems, ne, st, err);
 }
 
 /* After a refinement round: the subscribers of every own element split in it (split[e] != 0)
@@ -991,6 +1007,7 @@ hr_status hr_link_migrate(hr_solver *s, hr_err *err) {
   s->nlinks = s->cap_links = n;
   s->ndead = s->nsorted = 0;
   s->sorted = 0;
+  if (st == HR_OK) st = hr_cluster_migrate(s, err); /* cluster links received by elements */
   if (st != HR_OK) return st;
   s->nsubs = 0;
   memset(s->esub, 0, (size_t)s->nel);
@@ -1013,7 +1030,7 @@ typedef struct msg_create {
  * marked ghosts to split them too; the owners of split elements send each new child that
  * another rank owns to that rank. Then the new own elements' open fractions. A collective;
  * every rank returns the same status. */
-static hr_status split_marked(hr_solver *s, const uint8_t *mark, int64_t n, hr_err *err) {
+hr_status hr_link_split_marked(hr_solver *s, const uint8_t *mark, int64_t n, hr_err *err) {
   const int64_t nel0 = s->nel;
   hr_status st = HR_OK;
   int64_t nreq = 0;
@@ -1228,7 +1245,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     }
     if (st != HR_OK) st = hr_err_set(err, st, "refinement exceeds a limit or is out of memory");
     if ((st = hr_dist_agree(s, st, err)) != HR_OK) goto fail;
-    if ((st = split_marked(s, mark, s->nel, err)) != HR_OK) goto fail;
+    if ((st = hr_link_split_marked(s, mark, s->nel, err)) != HR_OK) goto fail;
     /* Keep: append in order. */
     if (nkeep + nk > capkeep) {
       int64_t nc = capkeep ? capkeep : 1024;

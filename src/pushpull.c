@@ -395,20 +395,35 @@ static hr_status push_pull_dist(hr_solver *s, double *maxc, hr_err *err) {
   return st;
 }
 
-/* Every root's radiosity on every rank (outputs and the radiosity unit read them). */
+/* Every root's radiosity on every rank (outputs and the radiosity unit read them); with
+ * clustering also what the clusters' pull reads of every root (cluster.c): the radiosity it
+ * sends, its leaves' range and its reference radiosity. One sum in which each root's values
+ * come from its owner and zeros from every other rank (x + 0 == x: exact). */
 static hr_status share_roots(hr_solver *s, hr_err *err) {
-  const int n = s->scene->nsurfs;
-  double *b = calloc((size_t)n * 3, sizeof *b);
+  const int n = s->scene->nsurfs, m = s->cl ? 8 : 3;
+  double *b = calloc((size_t)n * (size_t)m, sizeof *b);
   hr_status st = hr_dist_agree(s, b ? HR_OK : hr_err_set(err, HR_ERR_NOMEM, "out of memory"),
                                err);
   if (st != HR_OK) {
     free(b);
     return st;
   }
-  for (int i = 0; i < n; i++)
-    if (hr_owns(s, i)) memcpy(b + 3 * i, s->B[i], 3 * sizeof *b);
-  hr_dist_sum_f64(s->dist, b, 3 * (int64_t)n);
-  for (int i = 0; i < n; i++) memcpy(s->B[i], b + 3 * i, 3 * sizeof *b);
+  for (int i = 0; i < n; i++) {
+    if (!hr_owns(s, i)) continue;
+    double *v = b + (size_t)m * (size_t)i;
+    memcpy(v, s->B[i], 3 * sizeof *b);
+    if (m == 3) continue;
+    memcpy(v + 3, s->Bs[i], 3 * sizeof *b);
+    v[6] = s->bvar[i], v[7] = s->bref[i];
+  }
+  hr_dist_sum_f64(s->dist, b, m * (int64_t)n);
+  for (int i = 0; i < n; i++) {
+    const double *v = b + (size_t)m * (size_t)i;
+    memcpy(s->B[i], v, 3 * sizeof *b);
+    if (m == 3 || hr_owns(s, i)) continue;
+    memcpy(s->Bs[i], v + 3, 3 * sizeof *b);
+    s->bvar[i] = v[6], s->bref[i] = v[7];
+  }
   free(b);
   return HR_OK;
 }

@@ -5,6 +5,7 @@
 #include "report.h"
 
 #include <errno.h>
+#include <stdlib.h>
 #include <string.h>
 
 static hr_status open_out(const char *path, FILE **f, hr_err *err) {
@@ -35,6 +36,10 @@ hr_status hr_report_csv(const char *path, const hr_solver *s, hr_err *err) {
   hr_status st = open_out(path, &f, err);
   if (st != HR_OK) return st;
   const hr_scene *sc = hr_solver_scene(s);
+  /* test hook HRAD_TEST_EXACT=1: every bit of the numbers (hexadecimal floats), so that tests
+   * compare solutions exactly, not to the 9 digits written otherwise */
+  const char *ex = getenv("HRAD_TEST_EXACT");
+  const int exact = ex && *ex && strcmp(ex, "0") != 0;
   fprintf(f, "id,area,r,g,b,status\n");
   for (int i = 0; i < sc->ninputs; i++) {
     const hr_input *in = &sc->inputs[i];
@@ -43,7 +48,7 @@ hr_status hr_report_csv(const char *path, const hr_solver *s, hr_err *err) {
       hr_solver_poly_radiosity(s, in->poly, b);
       area = sc->poly_area[in->poly];
     }
-    fprintf(f, "%d,%.9g,%.9g,%.9g,%.9g,", i, area, b[0], b[1], b[2]);
+    fprintf(f, exact ? "%d,%a,%a,%a,%a," : "%d,%.9g,%.9g,%.9g,%.9g,", i, area, b[0], b[1], b[2]);
     if (in->kind == HR_INPUT_SOLVED)
       fprintf(f, "solved\n");
     else if (in->kind == HR_INPUT_DUPLICATE)

@@ -231,10 +231,11 @@ static int64_t count_own(const hr_solver *s) {
 
 /* The counts reported (links, rays, leaves, elements) over all ranks. */
 void hr_solver_sync_counts(hr_solver *s) {
-  int64_t v[5] = {s->nlinks - s->ndead, s->rays, s->initial_links, count_leaves(s),
-                  count_own(s)};
-  hr_dist_sum_i64(s->dist, v, 5);
+  int64_t v[6] = {s->nlinks - s->ndead, s->rays, s->initial_links, count_leaves(s),
+                  count_own(s), hr_cluster_links(s)};
+  hr_dist_sum_i64(s->dist, v, 6);
   s->g_links = v[0], s->g_rays = v[1], s->g_initial = v[2], s->g_leaves = v[3], s->g_nel = v[4];
+  s->g_clinks = v[5];
 }
 
 hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err) {
@@ -260,11 +261,6 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uin
   if (s->started) return hr_err_set(err, HR_ERR_INVALID, "hr_solver_set_dist: solver has run");
   const int P = hr_dist_size(d), n = s->scene->nsurfs;
   if (!d || P == 1) return HR_OK; /* one process: nothing to spread */
-  if (hr_solver_clustered(s))
-    return hr_err_set(err, HR_ERR_INVALID,
-                      "%s: clustering (--cluster) does not run over several processes yet; "
-                      "use one process with threads",
-                      s->scene->name);
   if (owner)
     for (int i = 0; i < n; i++)
       if (owner[i] < 0 || owner[i] >= P)
@@ -293,10 +289,10 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uin
   if (tm) s->migrate_seed = strtoull(tm, NULL, 10);
   const char *tf = getenv("HRAD_TEST_FAIL");
   if (tf) {
-    static const char *const names[] = {"", "init", "refine", "push-pull"};
+    static const char *const names[] = {"", "init", "refine", "push-pull", "cluster"};
     char ph[16] = "";
     if (sscanf(tf, "%d:%15[a-z-]:%d", &s->fail_rank, ph, &s->fail_iter) >= 2)
-      for (int k = 1; k < 4; k++)
+      for (int k = 1; k < 5; k++)
         if (!strcmp(ph, names[k])) s->fail_phase = k;
   }
   return HR_OK;
@@ -581,7 +577,8 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
      * next iteration's. */
     if (cb) {
       hr_iter_info info = {s->iterations, bf_e, s->dist ? s->g_leaves : count_leaves(s),
-                           s->dist ? s->g_links : s->nlinks - s->ndead + hr_cluster_links(s),
+                           s->dist ? s->g_links + s->g_clinks
+                                   : s->nlinks - s->ndead + hr_cluster_links(s),
                            change, s->t.total};
       int64_t stop = cb(ud, s, &info) != 0;
       hr_dist_max_i64(s->dist, &stop, 1); /* every rank stops after the same iteration */
@@ -601,9 +598,9 @@ void hr_solver_stats(const hr_solver *s, hr_stats *st) {
   st->npolys = s->scene->npolys;
   st->elements = s->dist ? s->g_leaves : count_leaves(s);
   st->elements_all = s->dist ? s->g_nel : s->nel;
-  st->links = s->dist ? s->g_links : s->nlinks - s->ndead + hr_cluster_links(s);
+  st->links = s->dist ? s->g_links + s->g_clinks : s->nlinks - s->ndead + hr_cluster_links(s);
   st->clusters = hr_cluster_count(s);
-  st->cluster_links = hr_cluster_links(s);
+  st->cluster_links = s->dist ? s->g_clinks : hr_cluster_links(s);
   st->initial_links = s->dist ? s->g_initial : s->initial_links;
   st->iterations = s->iterations;
   st->rays = s->dist ? s->g_rays : s->rays;
@@ -659,7 +656,7 @@ hr_status hr_solver_rank_stats(const hr_solver *s, hr_rank_stats *all, hr_err *e
   memset(&me, 0, sizeof me);
   me.rank = s->rank;
   for (int i = 0; i < s->scene->nsurfs; i++) me.surfaces += hr_owns(s, i);
-  me.links = s->nlinks - s->ndead;
+  me.links = s->nlinks - s->ndead + hr_cluster_links(s);
   me.leaves = count_leaves(s);
   me.elements = count_own(s);
   me.ghosts = s->nel - me.elements;
@@ -669,7 +666,8 @@ hr_status hr_solver_rank_stats(const hr_solver *s, hr_rank_stats *all, hr_err *e
                         2 * (sizeof(uint64_t) + sizeof(int32_t));
   me.elem_mb = (double)s->nel * per_el / 1e6;
   me.link_mb = ((double)s->nlinks * sizeof(hr_link) + (double)s->npool * 4 +
-                (double)s->nrstart * 16 + (double)s->nsorted * 8) / 1e6;
+                (double)s->nrstart * 16 + (double)s->nsorted * 8 +
+                (double)hr_cluster_links(s) * (double)hr_cluster_link_bytes(s)) / 1e6;
   hr_dist_msg_counters(s->dist, &me.msgs, &me.msg_bytes);
   me.balancings = s->nbalance, me.migrations = s->nmoved;
   me.rays = s->rays;

@@ -149,6 +149,7 @@ struct hr_solver {
   int64_t nomap;
   int rank, nranks;
   int64_t g_links, g_rays, g_initial, g_leaves, g_nel; /* over all ranks */
+  int64_t g_clinks;   /* cluster links over all ranks (g_links counts element links only) */
   double mpi_t[4];    /* seconds inside MPI per phase: init graph, refine, gather, push-pull */
   int64_t msgs, msg_bytes; /* point-to-point messages (batches) and bytes this rank sent */
   /* distributed runs: every leaf (gid order) gathered on rank 0 by hr_solver_collect */
@@ -170,7 +171,7 @@ struct hr_solver {
   int fail_rank, fail_phase, fail_iter;
 };
 
-enum { HR_PHASE_NONE, HR_PHASE_INIT, HR_PHASE_REFINE, HR_PHASE_PUSHPULL };
+enum { HR_PHASE_NONE, HR_PHASE_INIT, HR_PHASE_REFINE, HR_PHASE_PUSHPULL, HR_PHASE_CLUSTER };
 /* 1 if the test hook makes this rank fail now, in 'phase'. */
 static inline int hr_test_fail(const hr_solver *s, int phase) {
   return s->fail_phase == phase && s->rank == s->fail_rank &&
@@ -238,6 +239,15 @@ int hr_link_pair(const hr_solver *s, int32_t i, int32_t j, hr_link *out, int64_t
  * changed; and subscriptions of this rank's ghost sources at their owners. */
 hr_status hr_link_migrate(hr_solver *s, hr_err *err);
 hr_status hr_link_subscribe(hr_solver *s, hr_err *err);
+/* Subscriptions of the ghost sources of the links s->links[lo, nlinks) and of the ghosts
+ * elems[0, ne) (cluster links' sources); 'st' is this rank's status so far. A collective in
+ * distributed runs (every rank returns the same status); returns st in one process. */
+hr_status hr_link_subscribe_new(hr_solver *s, int64_t lo, const int32_t *elems, int64_t ne,
+                                hr_status st, hr_err *err);
+/* Subdivides the elements marked in mark[0, n) (own ones and ghosts; the owners of ghosts split
+ * theirs, and tell the subscribers and the owners of the children), then the new own elements'
+ * open fractions. A collective in distributed runs; every rank returns the same status. */
+hr_status hr_link_split_marked(hr_solver *s, const uint8_t *mark, int64_t n, hr_err *err);
 
 /* pushpull.c: push-pull of every tree ({14}); the largest change of B over the leaves in
  * '*maxc'. A collective in distributed runs (every rank gets the same status and maxc). */

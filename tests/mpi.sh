@@ -2,9 +2,10 @@
 # The distributed solver under mpirun (README "Many processes"): the same answer, bit for bit, as
 # one process, for P = 1, 2, 3, 4, 7 ranks, 1 or 2 threads per rank and random assignments of
 # the elements (subtrees at every depth) to ranks (surfaces.csv, the images, the meshes and the
-# counts of stats.json), with graph balancing by each method; a rank that fails in any phase (HRAD_TEST_FAIL) ends the whole run with
-# one line, exit status 1, no outputs and no hang; bad input reported once; options not supported
-# yet refused.
+# counts of stats.json), with graph balancing by each method, and with clustering (--cluster on:
+# cluster links on their receivers' owners, any P, threads, assignment, migration, balancing,
+# checkpoints); a rank that fails in any phase (HRAD_TEST_FAIL) ends the whole run with one line,
+# exit status 1, no outputs and no hang; bad input reported once; a bad option refused once.
 # Runs above 2 ranks are oversubscribed on 2 cores: correctness only, no timing here.
 # Usage: mpi.sh HRAD_BINARY SOURCE_DIR SHARED_DIR
 set -u
@@ -14,6 +15,10 @@ if ! command -v mpirun >/dev/null; then
   exit 0
 fi
 export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1
+# surfaces.csv with every bit of each number (hexadecimal floats), so that "identical" means
+# bit-identical solutions, not equal to 9 digits (a summation order that differs only in the
+# last bits is caught: a clustered gather in another order passes at 9 digits)
+export HRAD_TEST_EXACT=1
 # Under the sanitizer build (make test-asan): Open MPI leaves its own allocations at
 # MPI_Finalize, some in plugins already unloaded (no module to suppress by), so leak checking is
 # off for these runs only; every other test checks hrad's leaks, and ASan still checks memory
@@ -32,8 +37,9 @@ same() {
     cmp -s "$a/$f" "$b/$f" || d="$d $f"
   done
   local ca cb
-  ca=$(grep -E '"(elements|elements_all|links|initial_links|iterations|rays|converged)"' "$a/stats.json")
-  cb=$(grep -E '"(elements|elements_all|links|initial_links|iterations|rays|converged)"' "$b/stats.json")
+  local keys='"(elements|elements_all|links|initial_links|iterations|rays|converged|cluster_links)"'
+  ca=$(grep -E "$keys" "$a/stats.json")
+  cb=$(grep -E "$keys" "$b/stats.json")
   [ "$ca" = "$cb" ] || d="$d stats.json-counts"
   [ -z "$d" ] && ok "$what: identical to one process" || bad "$what: differs in$d"
 }
@@ -115,6 +121,61 @@ for spec in 1:init 2:refine:3 1:push-pull:2 0:refine:2; do
     cat "$t/err"
   fi
 done
+
+# ---------------------------------------------------------------- clustering
+# --cluster on (docs/design.md, "Clustering"): each cluster link lives on its receiver's owner
+# and carries its place in the one-process order, in which the gather sums; the clusters'
+# fields are summed over the ranks. The same answer for any P, threads, random assignment,
+# migration after every iteration and balancing; a clustered checkpoint resumes on other P; a
+# rank failing within cluster refinement (or building the clusters) ends the run cleanly.
+k=(--quiet --size 96x72 --bf-low 3e-3 --cluster on)
+"$hrad" "${k[@]}" --threads 2 -o "$t/k1" cornell || bad "plain clustered cornell run failed"
+grep -q '"cluster_links": [1-9]' "$t/k1/stats.json" \
+  || bad "cornell --cluster on made no cluster links"
+for np in 2 3; do # (4: the resumed checkpoint below)
+  mpi "$np" "${k[@]}" --threads 1 -o "$t/k$np-mpi" cornell && same "$t/k1" "$t/k$np-mpi" cornell \
+    "clustered cornell, $np ranks x 1 thread" || bad "clustered cornell on $np ranks: exit $?"
+done
+mpi 2 "${k[@]}" --threads 2 -o "$t/k2t2" cornell && same "$t/k1" "$t/k2t2" cornell \
+  "clustered cornell, 2 ranks x 2 threads" || bad "clustered cornell 2x2: exit $?"
+HRAD_TEST_MIGRATE=5 mpi 3 "${k[@]}" --threads 1 -o "$t/kmg" cornell \
+  && same "$t/k1" "$t/kmg" cornell "clustered cornell, 3 ranks, elements migrated every iteration" \
+  || bad "clustered migration run: exit $?"
+mpi 3 "${k[@]}" --threads 1 --balance metis --balance-idle 0 -o "$t/kbal" cornell \
+  && same "$t/k1" "$t/kbal" cornell "clustered cornell, 3 ranks, --balance metis" \
+  || bad "clustered cornell --balance metis: exit $?"
+# floor: 292 surfaces, 291 clusters, cluster links received by elements at every depth
+kf=(--quiet --size 64x48 --bf-low 1e-2 --cluster on)
+"$hrad" "${kf[@]}" --threads 1 -o "$t/kfref" floor || bad "plain clustered floor run failed"
+for seed in 3 4; do
+  np=$((2 + seed))
+  mpi "$np" "${kf[@]}" --threads 1 --balance "random:$seed" -o "$t/kf$seed" floor \
+    && same "$t/kfref" "$t/kf$seed" floor "clustered floor, $np ranks, random assignment $seed" \
+    || bad "clustered floor on $np ranks (random:$seed): exit $?"
+done
+mpi 3 "${k[@]}" --threads 1 --max-iters 6 --checkpoint "$t/kk3.ckpt" -o "$t/kk3" cornell
+mpi 2 "${k[@]}" --threads 1 --resume "$t/kk3.ckpt" -o "$t/kk3r2" cornell \
+  && same "$t/k1" "$t/kk3r2" cornell "clustered checkpoint of 3 ranks, resumed on 2" \
+  || bad "clustered resume on 2 ranks: exit $?"
+"$hrad" "${k[@]}" --resume "$t/kk3.ckpt" -o "$t/kk3r1" cornell \
+  && same "$t/k1" "$t/kk3r1" cornell "clustered checkpoint of 3 ranks, resumed in one process" \
+  || bad "clustered resume in one process: exit $?"
+"$hrad" "${k[@]}" --max-iters 5 --checkpoint "$t/kk1.ckpt" -o "$t/kk1" cornell
+mpi 4 "${k[@]}" --threads 1 --resume "$t/kk1.ckpt" -o "$t/kk1r4" cornell \
+  && same "$t/k1" "$t/kk1r4" cornell "clustered checkpoint of 1 process, resumed on 4 ranks" \
+  || bad "clustered resume on 4 ranks: exit $?"
+for spec in 1:init 2:cluster:1 0:cluster:4; do
+  HRAD_TEST_FAIL=$spec mpi 3 "${k[@]}" --threads 1 -o "$t/kx" cornell 2> "$t/err"
+  rc=$? n=$(grep -c '^hrad:' "$t/err")
+  if [ $rc -ne 0 ] && [ $rc -ne 124 ] && [ "$n" = 1 ] && [ ! -e "$t/kx" ] \
+     && grep -q "^hrad: rank ${spec%%:*}: .*clusters\? .*injected by HRAD_TEST_FAIL" "$t/err"; then
+    ok "clustered, rank failure $spec: exit $rc, one line, no outputs"
+  else
+    bad "clustered, rank failure $spec: exit $rc, $n hrad lines, outputs $(ls "$t/kx" 2>&1)"
+    cat "$t/err"
+  fi
+done
+rm -rf "$t"/k*
 
 # ---------------------------------------------------------------- bad input and usage
 printf 'v 0 0 0\nv 1 0 0\nf 1 2 9\n' > "$t/bad.obj"

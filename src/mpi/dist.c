@@ -246,7 +246,7 @@ hr_status hr_dist_alltoall_st(const hr_dist *d, const void *send, const int64_t 
   int64_t tot = 0;
   for (int64_t i = 0; i < npc; i++) tot += pc[i].n;
   char *rb = bad ? NULL : malloc((size_t)(tot > 0 ? tot : 1));
-  if (!rb) bad = 1;
+  if (!rb && !bad) bad = 1; /* (a failure before, 2, stays: the others get HR_ERR_REMOTE) */
   for (int64_t i = 0, o = 0; i < npc; o += pc[i].n, i++) {
     if (rb && pc[i].n) memcpy(rb + o, pc[i].buf, (size_t)pc[i].n);
     free(pc[i].buf);
