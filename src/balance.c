@@ -15,6 +15,7 @@
  * seed, and the best Z wins (the paper's parallel annealing, its reference [1], one period). A
  * new partition is expressed as a subtree map: an element is listed only where its rank differs
  * from its parent's. */
+#include "cluster.h"
 #include "mpi/dist.h"
 #include "partition/partition.h"
 #include "solver_impl.h"
@@ -246,6 +247,7 @@ static hr_status gather_graph(hr_solver *s, bgraph *g, hr_err *err) {
   if (!nodes || !ed || !recv) hr_dist_abort(s->dist, 1); /* every rank must take part */
   for (int64_t k = 0; k < s->nlinks; k++)
     if (s->links[k].Fu >= 0) recv[s->links[k].r]++;
+  hr_cluster_recv_counts(s, recv); /* gathered like element links */
   int64_t i = 0;
   const int iters = s->iterations > 1 ? s->iterations : 1;
   for (int64_t e = 0; e < s->nel; e++) {

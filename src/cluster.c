@@ -1299,6 +1299,10 @@ hr_status hr_cluster_import(hr_solver *s, const uint64_t *ids, const float *vals
 }
 
 int64_t hr_cluster_links(const hr_solver *s) { return s->cl ? s->cl->nlinks : 0; }
+void hr_cluster_recv_counts(const hr_solver *s, int64_t *recv) {
+  for (int64_t i = 0; s->cl && i < s->cl->nlinks; i++)
+    if (s->cl->links[i].r >= 0) recv[s->cl->links[i].r]++;
+}
 size_t hr_cluster_link_bytes(const hr_solver *s) {
   return sizeof(clink) + (s->dist ? sizeof(int64_t) : 0);
 }

@@ -41,6 +41,9 @@ void hr_cluster_pull(hr_solver *s);
 hr_status hr_cluster_export(const hr_solver *s, uint64_t **ids, float **vals, int64_t *n);
 hr_status hr_cluster_import(hr_solver *s, const uint64_t *ids, const float *vals, int64_t n);
 int64_t hr_cluster_links(const hr_solver *s); /* this rank's */
+/* Adds to recv[e] the count of this rank's cluster links that element e receives (graph
+ * balancing's work weights, balance.c). */
+void hr_cluster_recv_counts(const hr_solver *s, int64_t *recv);
 size_t hr_cluster_link_bytes(const hr_solver *s); /* what one cluster link takes */
 int64_t hr_cluster_count(const hr_solver *s);
 void hr_cluster_free(hr_clusters **c);

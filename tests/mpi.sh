@@ -211,25 +211,31 @@ pkill -KILL -f "$hrad --size 96x72 --bf-low 3e-3 --threads 1 --checkpoint $t/kk.
 mpi 2 --size 96x72 --bf-low 3e-3 --threads 1 --resume "$t/kk.ckpt" -o "$t/kkr" cornell 2> "$t/err" >/dev/null
 it=$(grep -o 'after iteration [0-9]*' "$t/err")
 same "$t/c1" "$t/kkr" cornell "3-rank job killed (kill -9), resumed on 2 ranks $it"
-# The balancing graph's work weights (balance.c): W = links received + 1 + 8 x the rays refinement
-# cast for the element's links per iteration, the rays counted on whichever rank refined the link
-# and merged on rank 0: the same on 2 ranks (random owners: every tree spread) as on one process,
-# and the rays part is not zero.
-"$hrad" --quiet --threads 1 --outputs csv,json --dump-graph "$t/g1.graph" -o "$t/g1" cornell \
-  && mpi 2 --quiet --threads 1 --outputs csv,json --dump-graph "$t/g2.graph" -o "$t/g2" cornell \
-  && L=$(sed -n 's/^ *"links": \([0-9]*\),$/\1/p' "$t/g1/stats.json") \
-  && awk -v L="$L" 'FNR == 1 { f++ } /^edges/ { e[f] = 1 }
-    !e[f] && NF == 6 { n[f]++; w[f, n[f]] = $3; id[f, n[f]] = $1 }
-    END { if (n[1] != n[2] || n[1] < 100) exit 1
-      for (i = 1; i <= n[1]; i++) {
-        if (id[1, i] != id[2, i]) exit 1
-        d = w[1, i] - w[2, i]; if (d < 0) d = -d; if (d > 1e-9 * w[1, i]) exit 1
-        sw += w[1, i] }
-      printf "%d nodes, %d links, W sum %.0f", n[1], L, sw
-      exit !(L > 0 && sw > 1.05 * (n[1] + L)) }' "$t/g1.graph" "$t/g2.graph" > "$t/gw" \
-  && ok "balancing weights with refinement's rays, the same on 2 ranks as on one: $(cat "$t/gw")" \
-  || bad "balancing weights differ between 1 process and 2 ranks, or carry no rays:" \
-    "$(cat "$t/gw" 2>/dev/null)"
+# The balancing graph's work weights (balance.c): W = links received (element and cluster links)
+# + 1 + 8 x the rays refinement cast for the element's links per iteration, the rays counted on
+# whichever rank refined the link and merged on rank 0: the same on 2 ranks (random owners: every
+# tree spread) as on one process, clustered or not, and the rays part is not zero.
+for cl in off on; do
+  "$hrad" --quiet --threads 1 --cluster $cl --outputs csv,json --dump-graph "$t/g1.graph" \
+    -o "$t/g1" cornell \
+    && mpi 2 --quiet --threads 1 --cluster $cl --outputs csv,json --dump-graph "$t/g2.graph" \
+      -o "$t/g2" cornell \
+    && L=$(sed -n 's/^ *"links": \([0-9]*\),$/\1/p' "$t/g1/stats.json") \
+    && awk -v L="$L" 'FNR == 1 { f++ } /^edges/ { e[f] = 1 }
+      !e[f] && NF == 6 { n[f]++; w[f, n[f]] = $3; id[f, n[f]] = $1 }
+      END { if (n[1] != n[2] || n[1] < 100) exit 1
+        for (i = 1; i <= n[1]; i++) {
+          if (id[1, i] != id[2, i]) exit 1
+          d = w[1, i] - w[2, i]; if (d < 0) d = -d; if (d > 1e-9 * w[1, i]) exit 1
+          sw += w[1, i] }
+        printf "%d nodes, %d links, W sum %.0f", n[1], L, sw
+        exit !(L > 0 && sw > 1.05 * (n[1] + L)) }' "$t/g1.graph" "$t/g2.graph" > "$t/gw" \
+    && ok "balancing weights (--cluster $cl) with refinement's rays, the same on 2 ranks as on" \
+      "one: $(cat "$t/gw")" \
+    || bad "balancing weights (--cluster $cl) differ between 1 process and 2 ranks, or carry no" \
+      "rays: $(cat "$t/gw" 2>/dev/null)"
+  rm -rf "$t/g1" "$t/g2" "$t/g1.graph" "$t/g2.graph"
+done
 mpi 2 --quiet --balance nonsense -o "$t/y" cornell 2> "$t/err"
 [ "$(grep -c "^hrad: --balance must be" "$t/err")" = 1 ] && ok "--balance nonsense: one usage line" \
   || { bad "--balance nonsense"; cat "$t/err"; }
