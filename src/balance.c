@@ -19,6 +19,7 @@
 #include "mpi/dist.h"
 #include "partition/partition.h"
 #include "solver_impl.h"
+#include "vec.h"
 
 #include <errno.h>
 #include <stdio.h>
@@ -30,9 +31,8 @@
 #define KEEP_GAIN 0.95
 /* The work of a ray cast in refinement, in units of a link's work in one iteration (gathered and
  * tested): measured on museum at 2 ranks, about 130 ns of refinement a ray (shaft filtering and
- * decisions included) against about 17 ns a link an iteration. Without it, W missed most of
- * refinement: floor's annealed partition had W within 1% and refinement busy times of 4.6 and
- * 5.9 s on its two ranks. */
+ * decisions included) against about 17 ns a link an iteration. Without it, W missed most of the
+ * work: on cornell the rays weigh about 4 times the links. */
 #define RAY_WORK 8.0
 
 /* What each rank sends rank 0 about one element: its own elements, and the work (rays) it did
@@ -131,12 +131,6 @@ typedef struct gid_map {
   int32_t *val;
 } gid_map;
 
-static uint64_t gid_hash(uint64_t z) { /* splitmix64's finaliser */
-  z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
-  z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
-  return z ^ (z >> 31);
-}
-
 static int gid_map_build(gid_map *m, const uint64_t *gid, int32_t n) {
   uint64_t cap = 16;
   while (cap < 2 * (uint64_t)n) cap *= 2;
@@ -145,7 +139,7 @@ static int gid_map_build(gid_map *m, const uint64_t *gid, int32_t n) {
   m->val = malloc(cap * sizeof *m->val);
   if (!m->key || !m->val) return 0;
   for (int32_t i = 0; i < n; i++) {
-    uint64_t h = gid_hash(gid[i]) & m->mask;
+    uint64_t h = u64_mix(gid[i]) & m->mask;
     while (m->key[h]) h = (h + 1) & m->mask;
     m->key[h] = gid[i], m->val[h] = i;
   }
@@ -153,7 +147,7 @@ static int gid_map_build(gid_map *m, const uint64_t *gid, int32_t n) {
 }
 
 static int32_t gid_map_get(const gid_map *m, uint64_t gid) {
-  for (uint64_t h = gid_hash(gid) & m->mask; m->key[h]; h = (h + 1) & m->mask)
+  for (uint64_t h = u64_mix(gid) & m->mask; m->key[h]; h = (h + 1) & m->mask)
     if (m->key[h] == gid) return m->val[h];
   return -1;
 }
@@ -238,10 +232,10 @@ static int build_graph(bgraph *g, node_rec *nodes, int64_t nn, edge_rec *ed, int
 /* Gathers the graph on rank 0 ('g' filled there; zeroed elsewhere). A collective. */
 static hr_status gather_graph(hr_solver *s, bgraph *g, hr_err *err) {
   memset(g, 0, sizeof *g);
-  int64_t nown = 0, nl = 0;
-  for (int64_t e = 0; e < s->nel; e++) nown += hr_owns(s, e) || s->erays[e] > 0;
+  int64_t nrec = 0, nl = 0; /* node records: own elements, and others' with rays cast here */
+  for (int64_t e = 0; e < s->nel; e++) nrec += hr_owns(s, e) || s->erays[e] > 0;
   for (int64_t k = 0; k < s->nlinks; k++) nl += s->links[k].Fu >= 0;
-  node_rec *nodes = malloc((size_t)(nown + 1) * sizeof *nodes);
+  node_rec *nodes = malloc((size_t)(nrec + 1) * sizeof *nodes);
   edge_rec *ed = malloc((size_t)(nl + 1) * sizeof *ed);
   int64_t *recv = calloc((size_t)s->nel + 1, sizeof *recv);
   if (!nodes || !ed || !recv) hr_dist_abort(s->dist, 1); /* every rank must take part */
@@ -267,7 +261,7 @@ static hr_status gather_graph(hr_solver *s, bgraph *g, hr_err *err) {
   free(recv);
   void *an = NULL, *ae = NULL;
   int64_t nn = 0, ne = 0;
-  hr_status st = to_rank0(s, nodes, nown, sizeof *nodes, &an, &nn);
+  hr_status st = to_rank0(s, nodes, nrec, sizeof *nodes, &an, &nn);
   free(nodes);
   if (st == HR_OK) st = to_rank0(s, ed, nl, sizeof *ed, &ae, &ne);
   free(ed);

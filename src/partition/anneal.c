@@ -405,11 +405,11 @@ static double walk_drift(const hr_graph *g, int nparts, double alpha, uint64_t s
     anneal_run(&st, moves, t0, t0, &rng); /* a hot walk: many accepted moves and swaps */
     const double z = hr_partition_cost(g, part, nparts, alpha, NULL, NULL);
     drift = z > 0.0 ? fabs(st.z - z) / z : fabs(st.z - z);
+    anneal_state scan = st; /* the same walk's state, read by scanning the edges */
+    scan.conn = NULL;
     for (int32_t v = 0; table && v < g->n; v++) /* each entry against a fresh scan */
       for (int p = 0; p < nparts; p++) {
         double e, unused, all;
-        anneal_state scan = st;
-        scan.conn = NULL;
         edges_into(&scan, v, p, p, &e, &unused, &all);
         const double te = st.conn[(size_t)v * (size_t)nparts + (size_t)p];
         drift = fmax(drift, fabs(te - e) / (all > 0.0 ? all : 1.0));
