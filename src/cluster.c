@@ -67,11 +67,16 @@ struct hr_clusters {
   double *bref;       /* per cluster: area-weighted mean reference radiosity of its surfaces */
   double (*L)[NCH][9]; /* per cluster: incident field, A_l-weighted */
   int initial;        /* before the first pull: reference radiosities are the floor */
+  /* The links and, per link, its place: where it stands in the order in which refinement makes
+   * links (the first round's kept links in their order, then each later round's, a round's
+   * links being the children of the round before in their parents' order; docs/design.md,
+   * "Clustering"); 'vnext' is the next unused place. A rank holds the links of the receivers
+   * it owns, in link order: grouped by receiver (ascending node id), each receiver's by
+   * place. The gather sums each receiver's links in place order, which is the same in one
+   * process and on any number of ranks, and it streams through the links. */
   clink *links;
-  int64_t nlinks;
-  /* Distributed runs (NULL in one process): per link, its place in the order the links would
-   * have in one process, ascending (see "distribution" below); the next unused place. */
   int64_t *pos;
+  int64_t nlinks, cap; /* links, and room for them */
   int64_t vnext;
 };
 
@@ -522,13 +527,11 @@ static void estimate(const hr_solver *s, clink *l, int weak, int64_t *rays) {
  * (Bm, bhi, blo, bref) are replicated, computed alike on every rank from the roots, which every
  * rank holds (push-pull shares what the pull reads of them). Each cluster link lives on the rank
  * that owns its receiver: an element's owner, or for a cluster a rank drawn from its number.
- * The gather sums each receiver's links in the order they would have in one process, so every
- * link carries a place, a key of that order ('pos'): in one process, refinement keeps the links
- * of its first round in their order and appends each later round's kept links, and a round's
- * links are the children of the one before, in their parents' order. So a kept link keeps its
- * place, and each round's children take new places above all earlier ones (vnext, the same on
- * every rank), in their parents' order: from prefix sums of the children counts of the links
- * that split, over all ranks in place order (scan). The clusters' fields are summed over the
+ * The gather sums each receiver's links in place order (see hr_clusters), the same on any number
+ * of ranks: a kept link keeps its place, and each round's children take new places above all
+ * earlier ones (vnext, the same on every rank), in their parents' place order, from prefix sums
+ * of the children counts of the links that split, over all ranks in place order (scan; in one
+ * process a local prefix sum). The clusters' fields are summed over the
  * ranks (each written by one, zeros elsewhere), so every rank pushes them down alike and adds
  * what reaches its own roots. */
 
@@ -685,13 +688,72 @@ typedef struct placed {
   clink l;
 } placed;
 
+/* Link order (see hr_clusters): by receiver, then by place. */
 static int cmp_placed(const void *a, const void *b) {
   const placed *x = a, *y = b;
+  if (x->l.r != y->l.r) return x->l.r < y->l.r ? -1 : 1;
   return x->pos < y->pos ? -1 : x->pos > y->pos;
 }
 
+/* The order of a rank's links (see hr_clusters): by receiver, then by place. */
+static int link_before(int32_t ra, int64_t pa, int32_t rb, int64_t pb) {
+  return ra < rb || (ra == rb && pa < pb);
+}
+
+/* Puts the links [n0, n) of cl (in any order) among the links [0, n0) (in link order) so that
+ * all are in link order. */
+static hr_status regroup(hr_clusters *cl, int64_t n0, int64_t n) {
+  const int64_t m = n - n0;
+  if (m == 0) return HR_OK;
+  placed *t = malloc((size_t)m * sizeof *t);
+  if (!t) return HR_ERR_NOMEM;
+  for (int64_t j = 0; j < m; j++) t[j] = (placed){cl->pos[n0 + j], cl->links[n0 + j]};
+  qsort(t, (size_t)m, sizeof *t, cmp_placed);
+  /* merge from the back: the tail's old places are free */
+  int64_t i = n0 - 1, j = m - 1, k = n - 1;
+  while (j >= 0) {
+    if (i >= 0 && link_before(t[j].l.r, t[j].pos, cl->links[i].r, cl->pos[i])) {
+      cl->links[k] = cl->links[i], cl->pos[k--] = cl->pos[i--];
+    } else {
+      cl->links[k] = t[j].l, cl->pos[k--] = t[j--].pos;
+    }
+  }
+  free(t);
+  return HR_OK;
+}
+
+/* 1 when cl's links are in link order (asserts). */
+static int in_link_order(const hr_clusters *cl) {
+  for (int64_t i = 1; i < cl->nlinks; i++)
+    if (!link_before(cl->links[i - 1].r, cl->pos[i - 1], cl->links[i].r, cl->pos[i])) return 0;
+  return 1;
+}
+
+/* Room for n links in cl->links and cl->pos. */
+static hr_status reserve(hr_clusters *cl, int64_t n) {
+  if (n <= cl->cap) return HR_OK;
+  int64_t c = cl->cap > 16 ? cl->cap : 16;
+  while (c < n) c *= 2;
+  clink *l = realloc(cl->links, (size_t)c * sizeof *l);
+  if (l) cl->links = l;
+  int64_t *p = l ? realloc(cl->pos, (size_t)c * sizeof *p) : NULL;
+  if (p) cl->pos = p;
+  if (!p) return HR_ERR_NOMEM;
+  cl->cap = c;
+  return HR_OK;
+}
+
+/* Puts all of cl's links in link order. */
+static hr_status sort_links(hr_clusters *cl) {
+  const int64_t n = cl->nlinks;
+  cl->nlinks = 0;
+  const hr_status st = regroup(cl, 0, n);
+  cl->nlinks = n;
+  return st;
+}
+
 /* The links cur[0, n) at places pos whose receivers other ranks own go there; those that arrive
- * join the others, and all are put in place order. A collective; 'st' is this rank's status so
+ * join the others, and all are put in link order. A collective; 'st' is this rank's status so
  * far, and every rank returns the same status. */
 static hr_status route(hr_solver *s, clink **pcur, int64_t **ppos, int64_t *pn, hr_status st,
                        hr_err *err) {
@@ -773,7 +835,9 @@ hr_status hr_cluster_sources(const hr_solver *s, int32_t **out, int64_t *n) {
 hr_status hr_cluster_migrate(hr_solver *s, hr_err *err) {
   hr_clusters *cl = s->cl;
   if (!cl || !s->dist) return HR_OK;
-  return route(s, &cl->links, &cl->pos, &cl->nlinks, HR_OK, err);
+  const hr_status st = route(s, &cl->links, &cl->pos, &cl->nlinks, HR_OK, err);
+  cl->cap = cl->nlinks > 0 ? cl->nlinks : 1; /* route's reallocation */
+  return st;
 }
 
 void hr_cluster_keep(const hr_solver *s, uint8_t *keep) {
@@ -792,6 +856,7 @@ void hr_cluster_renumber(hr_solver *s, const int32_t *nu) {
     if (l->r >= 0) l->r = nu[l->r];
     if (l->s >= 0) l->s = nu[l->s];
   }
+  assert(!cl || in_link_order(cl)); /* hr_elem_compact keeps the elements' order */
 }
 
 /* ---------------------------------------------------------------- refinement */
@@ -927,30 +992,41 @@ static int kid_count(const clink *l, int dec) {
  * per-link output array is needed. */
 #define CHUNK 4096
 
-/* Distributed refinement, after the decisions dec[0, n) of this rank's links cur (places pos):
- * ex[i], for a link that splits, the place of its first child among the next round's links
- * (the children of all ranks' links, in place order); '*tot' their count; '*what' whether some
- * link of some rank becomes an element link (ELEM_LINKS) and whether some rank opens an element
- * that has no children yet (ELEM_SPLITS). A collective (see scan); '*ex' is allocated. */
+/* After the decisions dec[0, n) of this rank's links cur (places pos): ex[i], for a link that
+ * splits, the place of its first child among the next round's links (offsets from cl->vnext:
+ * the children of all ranks' links, numbered in their parents' place order); '*tot' their
+ * count. Distributed: '*what' whether some link of some rank becomes an element link
+ * (ELEM_LINKS) and whether some rank opens an element that has no children yet (ELEM_SPLITS),
+ * and a collective (see scan). '*ex' is allocated. */
 enum { ELEM_LINKS = 1, ELEM_SPLITS = 2 };
 static hr_status places(hr_solver *s, const clink *cur, const int64_t *pos, int64_t n,
                         const uint8_t *dec, int64_t **ex, int64_t *tot, int *what, hr_status st,
                         hr_err *err) {
+  scan_rec *q = malloc((size_t)(n > 0 ? n : 1) * sizeof *q);
   int64_t *k = malloc((size_t)(n > 0 ? n : 1) * sizeof *k);
   int64_t *v = malloc((size_t)(n > 0 ? n : 1) * sizeof *v);
   int64_t *e = malloc((size_t)(n > 0 ? n : 1) * sizeof *e), m = 0;
   *ex = malloc((size_t)(n > 0 ? n : 1) * sizeof **ex);
-  if (st == HR_OK && (!k || !v || !e || !*ex)) st = nomem(err);
-  int fl = 0;
+  if (st == HR_OK && (!q || !k || !v || !e || !*ex)) st = nomem(err);
+  int fl = 0, sorted = 1;
   for (int64_t i = 0; i < n && st == HR_OK; i++) {
     const int32_t id = dec[i] == C_SPLIT_R ? cur[i].r : dec[i] == C_SPLIT_S ? cur[i].s : -1;
     fl |= (dec[i] == C_ELEM ? ELEM_LINKS : 0) | (id >= 0 && s->el[id].child < 0 ? ELEM_SPLITS : 0);
-    if (kid_count(&cur[i], dec[i]) > 0) k[m] = pos[i], v[m++] = kid_count(&cur[i], dec[i]);
+    if (kid_count(&cur[i], dec[i]) == 0) continue;
+    q[m] = (scan_rec){pos[i], kid_count(&cur[i], dec[i]), i};
+    sorted &= m == 0 || q[m - 1].key < q[m].key;
+    m++;
   }
-  st = scan(s, k, v, st == HR_OK ? m : 0, e, tot, fl, what, st, err);
-  for (int64_t i = 0, j = 0; i < n && st == HR_OK; i++)
-    if (kid_count(&cur[i], dec[i]) > 0) (*ex)[i] = e[j++];
-  free(k), free(v), free(e);
+  if (st == HR_OK && !sorted) qsort(q, (size_t)m, sizeof *q, cmp_scan_rec);
+  for (int64_t j = 0; j < m && st == HR_OK; j++) k[j] = q[j].key, v[j] = q[j].v;
+  if (s->dist) {
+    st = scan(s, k, v, st == HR_OK ? m : 0, e, tot, fl, what, st, err);
+  } else {
+    *tot = 0, *what = fl;
+    for (int64_t j = 0; j < m && st == HR_OK; j++) e[j] = *tot, *tot += v[j];
+  }
+  for (int64_t j = 0; j < m && st == HR_OK; j++) (*ex)[q[j].from] = e[j];
+  free(q), free(k), free(v), free(e);
   return st;
 }
 
@@ -974,19 +1050,20 @@ static hr_status split_dist(hr_solver *s, const clink *cur, int64_t n, const uin
 hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
   hr_clusters *cl = s->cl;
   if (!cl) return HR_OK;
+  assert(in_link_order(cl));
   const int dist = s->dist != NULL;
-  int64_t ncur = cl->nlinks, nout = 0, cap_out = ncur > 16 ? ncur : 16;
-  clink *cur = cl->links, *out = malloc((size_t)cap_out * sizeof *out);
-  /* distributed: the places of cur's and out's links */
-  int64_t *cpos = cl->pos, *opos = dist ? malloc((size_t)cap_out * sizeof *opos) : NULL;
-  cl->links = NULL, cl->pos = NULL, cl->nlinks = 0;
-  hr_status st = out && (!dist || opos) ? HR_OK : HR_ERR_NOMEM;
+  /* The first round works on cl's links in place; each later one on the children of the
+   * round before ('cur', 'cpos'). The kept links gather in cl->links[0, nout). */
+  clink *cur = cl->links;
+  int64_t *cpos = cl->pos, ncur = cl->nlinks, nout = 0, nfirst = 0;
+  hr_status st = HR_OK;
   int64_t rays = 0, made = 0;
   /* the test hook HRAD_TEST_FAIL=RANK:cluster:ITER: this rank fails within the first round */
   int injected = hr_test_fail(s, HR_PHASE_CLUSTER);
   /* one process: until no link splits; distributed: until none does on any rank, every rank
    * taking part in every round's exchanges */
-  while (dist || (st == HR_OK && ncur > 0)) {
+  for (int round = 0; dist || (st == HR_OK && ncur > 0); round++) {
+    const int inplace = round == 0;
     const int64_t nch = (ncur + CHUNK - 1) / CHUNK;
     uint8_t *dec = malloc((size_t)(ncur > 0 ? ncur : 1));
     int64_t(*cnt)[3] = calloc((size_t)nch + 1, sizeof *cnt); /* keep, element, kids */
@@ -1012,7 +1089,7 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
       for (int64_t c = 0; c < nch; c++)
         for (int k = 0; k < 3; k++) cnt[c + 1][k] += cnt[c][k];
     }
-    if (dist && (st = places(s, cur, cpos, ncur, dec, &ex, &tot, &what, st, err)) != HR_OK) {
+    if ((st = places(s, cur, cpos, ncur, dec, &ex, &tot, &what, st, err)) != HR_OK) {
       free(dec), free(cnt), free(ex);
       break;
     }
@@ -1031,51 +1108,52 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
     }
     const int64_t nkeep = cnt[nch][0], nelem = cnt[nch][1], nkids = cnt[nch][2];
     if (st == HR_OK && injected == 1) st = HR_ERR_NOMEM, injected = 2;
-    if (st == HR_OK && nout + nkeep > cap_out) {
-      while (cap_out < nout + nkeep) cap_out *= 2;
-      clink *o = realloc(out, (size_t)cap_out * sizeof *o);
-      if (!o) st = HR_ERR_NOMEM;
-      else out = o;
-      int64_t *op = dist && o ? realloc(opos, (size_t)cap_out * sizeof *op) : NULL;
-      if (op) opos = op;
-      else if (dist) st = HR_ERR_NOMEM;
-    }
+    if (st == HR_OK && !inplace && reserve(cl, nout + nkeep) != HR_OK) st = HR_ERR_NOMEM;
     clink *next = malloc((size_t)(nkids > 0 ? nkids : 1) * sizeof *next);
-    int64_t *npos = dist ? malloc((size_t)(nkids > 0 ? nkids : 1) * sizeof *npos) : NULL;
+    int64_t *npos = malloc((size_t)(nkids > 0 ? nkids : 1) * sizeof *npos);
     hr_link *el = malloc((size_t)(nelem > 0 ? nelem : 1) * sizeof *el);
     uint8_t *eok = calloc((size_t)(nelem > 0 ? nelem : 1), 1);
-    if (st == HR_OK && (!next || !el || !eok || (dist && !npos))) st = HR_ERR_NOMEM;
+    if (st == HR_OK && (!next || !el || !eok || !npos)) st = HR_ERR_NOMEM;
     const int64_t nl0 = s->nlinks;
     if (st == HR_OK) {
+      clink *out = cl->links;
+      int64_t *opos = cl->pos;
+      /* in place: each chunk first packs its kept links at its own start (never past the link
+       * being read), then the chunks move down in order */
 #pragma omp parallel for schedule(dynamic, 1) reduction(+ : rays, made) if (nch > 1) \
     num_threads(s->threads)
       for (int64_t c = 0; c < nch; c++) {
         const int64_t hi = (c + 1) * CHUNK < ncur ? (c + 1) * CHUNK : ncur;
-        int64_t ko = nout + cnt[c][0], eo = cnt[c][1], no = cnt[c][2];
+        int64_t ko = inplace ? c * CHUNK : nout + cnt[c][0], eo = cnt[c][1], no = cnt[c][2];
         for (int64_t i = c * CHUNK; i < hi; i++) {
           if (dec[i] == C_KEEP || dec[i] == C_WEAK) {
             if (cur[i].F < 0) estimate(s, &cur[i], dec[i] == C_WEAK, &rays), made++;
-            out[ko++] = cur[i];
+            if (!inplace || ko != i) out[ko] = cur[i], opos[ko] = cpos[i];
+            ko++;
           } else if (dec[i] == C_ELEM) {
             eok[eo] = (uint8_t)hr_link_pair(s, cur[i].r, cur[i].s, &el[eo], &rays);
             eo++;
           } else if (dec[i] == C_SPLIT_R || dec[i] == C_SPLIT_S) {
-            no += split(s, &cur[i], dec[i], next + no);
+            const int nk = split(s, &cur[i], dec[i], next + no);
+            for (int k = 0; k < nk; k++) npos[no + k] = cl->vnext + ex[i] + k;
+            no += nk;
           }
         }
       }
-      /* distributed: the places, in the order the loop above wrote the links; a kept link
-       * keeps its own */
-      for (int64_t i = 0, ko = nout, no = 0; dist && i < ncur; i++) {
-        if (dec[i] == C_KEEP || dec[i] == C_WEAK) opos[ko++] = cpos[i];
-        for (int k = 0; k < kid_count(&cur[i], dec[i]); k++) npos[no++] = cl->vnext + ex[i] + k;
+      for (int64_t c = 0; inplace && c < nch; c++) {
+        const int64_t from = c * CHUNK, to = cnt[c][0], m = cnt[c + 1][0] - cnt[c][0];
+        if (from != to && m > 0) {
+          memmove(out + to, out + from, (size_t)m * sizeof *out);
+          memmove(opos + to, opos + from, (size_t)m * sizeof *opos);
+        }
       }
       nout += nkeep;
+      if (inplace) nfirst = nout;
       st = append_links(s, el, eok, nelem, nnew);
     }
     cl->vnext += tot;
     free(dec), free(cnt), free(el), free(eok), free(ex);
-    free(cur), free(cpos);
+    if (!inplace) free(cur), free(cpos);
     cur = next, cpos = npos;
     ncur = st == HR_OK ? nkids : 0;
     if (!dist) continue;
@@ -1090,53 +1168,74 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
     free(src);
     if (st != HR_OK || tot == 0) break;
   }
-  free(cur), free(cpos);
+  if (cur != cl->links) free(cur), free(cpos);
   s->rays += rays;
   *nnew += made;
+  /* the later rounds' links among the first's */
+  if (st == HR_OK && regroup(cl, nfirst, nout) != HR_OK) st = HR_ERR_NOMEM;
   if (st != HR_OK && st != HR_ERR_REMOTE)
     st = hr_err_set(err, st, "out of memory in cluster refinement%s",
                     injected == 2 ? " (injected by HRAD_TEST_FAIL)" : "");
   if (dist) st = hr_dist_agree(s, st, err); /* (a failure in the last round) */
-  if (st != HR_OK) {
-    free(out), free(opos);
-    return st;
-  }
-  cl->links = out;
-  cl->pos = opos;
-  cl->nlinks = nout;
-  return HR_OK;
+  cl->nlinks = st == HR_OK ? nout : 0;
+  assert(st != HR_OK || in_link_order(cl));
+  return st;
 }
 
 /* ---------------------------------------------------------------- gather, push, pull */
+
+/* What link l brings its receiver: to G, Gu and Gf of an element, or to a cluster's field L. */
+static inline void gather_link(hr_solver *s, const clink *l) {
+  hr_clusters *cl = s->cl;
+  double mean, range;
+  const double *b = node_b(s, l->s, &mean, &range);
+  if (l->r >= 0) {
+    const double f = l->F;
+    for (int c = 0; c < 3; c++) s->G[l->r][c] += f * b[c];
+    s->Gu[l->r] += f * mean;
+    s->Gf[l->r] += f;
+    return;
+  }
+  if (l->kf == 0) return;
+  const double d[3] = {l->d[0], l->d[1], l->d[2]}, v[NCH] = {b[0], b[1], b[2], mean, 1};
+  double(*L)[9] = cl->L[-1 - l->r];
+  if (l->kf < 0) { /* even: E(n) = L_00 Y_00 = -kf v / 4 for every n */
+    for (int c = 0; c < NCH; c++) L[c][0] += -l->kf * hr_sh_alpha[0] * 0.282095 * v[c];
+    return;
+  }
+  double y[9];
+  hr_sh9(d, y);
+  for (int q = 0; q < 9; q++) {
+    const double w = l->kf * hr_sh_alpha[q] * y[q];
+    for (int c = 0; c < NCH; c++) L[c][q] += w * v[c];
+  }
+}
+
+/* The first link at or after i whose receiver is not that of link i - 1 (in link order the
+ * receivers ascend). */
+static int64_t receiver_start(const hr_clusters *cl, int64_t i) {
+  if (i <= 0 || i >= cl->nlinks) return i <= 0 ? 0 : cl->nlinks;
+  const int32_t r = cl->links[i - 1].r;
+  int64_t lo = i, hi = cl->nlinks; /* the first in [lo, hi) with a larger receiver */
+  while (lo < hi) {
+    const int64_t m = lo + (hi - lo) / 2;
+    if (cl->links[m].r > r) hi = m;
+    else lo = m + 1;
+  }
+  return lo;
+}
 
 void hr_cluster_gather(hr_solver *s) {
   hr_clusters *cl = s->cl;
   if (!cl) return;
   memset(cl->L, 0, (size_t)cl->n * sizeof *cl->L);
-  for (int64_t i = 0; i < cl->nlinks; i++) {
-    const clink *l = &cl->links[i];
-    double mean, range;
-    const double *b = node_b(s, l->s, &mean, &range);
-    if (l->r >= 0) {
-      const double f = l->F;
-      for (int c = 0; c < 3; c++) s->G[l->r][c] += f * b[c];
-      s->Gu[l->r] += f * mean;
-      s->Gf[l->r] += f;
-      continue;
-    }
-    if (l->kf == 0) continue;
-    const double d[3] = {l->d[0], l->d[1], l->d[2]}, v[NCH] = {b[0], b[1], b[2], mean, 1};
-    double(*L)[9] = cl->L[-1 - l->r];
-    if (l->kf < 0) { /* even: E(n) = L_00 Y_00 = -kf v / 4 for every n */
-      for (int c = 0; c < NCH; c++) L[c][0] += -l->kf * hr_sh_alpha[0] * 0.282095 * v[c];
-      continue;
-    }
-    double y[9];
-    hr_sh9(d, y);
-    for (int q = 0; q < 9; q++) {
-      const double w = l->kf * hr_sh_alpha[q] * y[q];
-      for (int c = 0; c < NCH; c++) L[c][q] += w * v[c];
-    }
+  /* chunks of whole receivers in parallel, each receiver's links in place order: the same sums
+   * as one pass over the list, on any number of threads */
+  const int64_t nch = (cl->nlinks + CHUNK - 1) / CHUNK;
+#pragma omp parallel for schedule(dynamic, 4) if (nch > 1) num_threads(s->threads)
+  for (int64_t c = 0; c < nch; c++) {
+    const int64_t hi = receiver_start(cl, (c + 1) * CHUNK);
+    for (int64_t i = receiver_start(cl, c * CHUNK); i < hi; i++) gather_link(s, &cl->links[i]);
   }
   /* distributed: each cluster's field is summed on the rank that holds its links, zeros
    * elsewhere (x + 0 == x); all of them on every rank */
@@ -1208,9 +1307,10 @@ static hr_status create(hr_solver *s, int64_t n) {
   if (!cl) return HR_ERR_NOMEM;
   s->cl = cl;
   if (build_tree(s, cl) != HR_OK) return HR_ERR_NOMEM;
-  cl->links = malloc((size_t)(n > 0 ? n : 1) * sizeof *cl->links);
-  if (s->dist) cl->pos = malloc((size_t)(n > 0 ? n : 1) * sizeof *cl->pos);
-  return cl->links && (!s->dist || cl->pos) ? HR_OK : HR_ERR_NOMEM;
+  cl->cap = n > 0 ? n : 1;
+  cl->links = malloc((size_t)cl->cap * sizeof *cl->links);
+  cl->pos = malloc((size_t)cl->cap * sizeof *cl->pos);
+  return cl->links && cl->pos ? HR_OK : HR_ERR_NOMEM;
 }
 
 hr_status hr_cluster_init(hr_solver *s, hr_err *err) {
@@ -1226,7 +1326,7 @@ hr_status hr_cluster_init(hr_solver *s, hr_err *err) {
   /* the root's self-link, on the rank that holds the root's links, at place 0 */
   if (node_owner(s, cl->root) == s->rank) {
     cl->links[0] = fresh(cl->root, cl->root);
-    if (cl->pos) cl->pos[0] = 0;
+    cl->pos[0] = 0;
     cl->nlinks = 1;
   }
   cl->vnext = 1;
@@ -1243,6 +1343,12 @@ hr_status hr_cluster_export(const hr_solver *s, uint64_t **ids, float **vals, in
   const hr_clusters *cl = s->cl;
   *ids = NULL, *vals = NULL, *n = cl ? cl->nlinks : 0;
   msg_clink *all = NULL;
+  if (!s->dist && cl && *n > 0) { /* in place order */
+    all = malloc((size_t)*n * sizeof *all);
+    if (!all) return HR_ERR_NOMEM;
+    for (int64_t i = 0; i < *n; i++) all[i] = pack(s, &cl->links[i], cl->pos[i]);
+    qsort(all, (size_t)*n, sizeof *all, cmp_msg_pos);
+  }
   if (s->dist && cl) { /* everybody's to rank 0, in place order */
     hr_err e2;
     const int64_t m = *n;
@@ -1272,7 +1378,7 @@ hr_status hr_cluster_export(const hr_solver *s, uint64_t **ids, float **vals, in
     return HR_ERR_NOMEM;
   }
   for (int64_t i = 0; i < *n; i++) {
-    const msg_clink m = all ? all[i] : pack(s, &cl->links[i], i);
+    const msg_clink m = all[i];
     (*ids)[2 * i] = m.r, (*ids)[2 * i + 1] = m.s;
     memcpy(*vals + 8 * i, m.v, sizeof m.v);
   }
@@ -1289,11 +1395,12 @@ hr_status hr_cluster_import(hr_solver *s, const uint64_t *ids, const float *vals
     const int32_t r = node_here(s, ids[2 * i], 0, &st), sn = node_here(s, ids[2 * i + 1], 0, &st);
     if (r == INT32_MIN || sn == INT32_MIN || (r >= 0 && sn >= 0)) return HR_ERR_PARSE;
     if (node_owner(s, r) != s->rank) continue; /* distributed: another rank's */
-    if (cl->pos) cl->pos[k] = i;
+    cl->pos[k] = i;
     cl->links[k++] = link_of(r, sn, vals + 8 * i);
   }
   cl->nlinks = k;
   cl->vnext = n;
+  if (!in_link_order(cl) && sort_links(cl) != HR_OK) return HR_ERR_NOMEM;
   hr_cluster_pull(s);
   return HR_OK;
 }
@@ -1304,7 +1411,8 @@ void hr_cluster_recv_counts(const hr_solver *s, int64_t *recv) {
     if (s->cl->links[i].r >= 0) recv[s->cl->links[i].r]++;
 }
 size_t hr_cluster_link_bytes(const hr_solver *s) {
-  return sizeof(clink) + (s->dist ? sizeof(int64_t) : 0);
+  (void)s;
+  return sizeof(clink) + sizeof(int64_t);
 }
 int64_t hr_cluster_count(const hr_solver *s) { return s->cl ? s->cl->n : 0; }
 
