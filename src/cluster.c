@@ -422,13 +422,22 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn) {
   int32_t er[EXACT_PAIRS], es[EXACT_PAIRS];
   const int nr = node_elems(s, r, er, EXACT_PAIRS), ns = node_elems(s, sn, es, EXACT_PAIRS);
   if (nr < 0 || ns < 0 || nr * ns > EXACT_PAIRS) return -1;
+  /* hr_ff_pair's sums, with each surface's geometry and each receiver's points of an order
+   * made once */
+  hr_ff_elem gs[EXACT_PAIRS];
+  for (int j = 0; j < ns; j++) gs[j] = hr_elem_geom(s, &s->el[es[j]]);
   double f = 0, ar = 0;
   for (int i = 0; i < nr; i++) {
     const hr_ff_elem gi = hr_elem_geom(s, &s->el[er[i]]);
-    double fi = 0;
+    hr_vec3 x[3][9];
+    double w[3][9], fi = 0;
+    int np[3] = {-1, -1, -1};
     for (int j = 0; j < ns; j++) {
-      const hr_ff_elem gj = hr_elem_geom(s, &s->el[es[j]]);
-      fi += hr_ff_pair(&gi, &gj, 0, NULL);
+      const int o = hr_ff_order(&gi, &gs[j]) - 1;
+      if (np[o] < 0) np[o] = hr_ff_points(&gi, o + 1, x[o], w[o]);
+      double fij = 0;
+      for (int k = 0; k < np[o]; k++) fij += w[o][k] * hr_ff_point(x[o][k], gi.n, &gs[j]);
+      fi += fij;
     }
     f += gi.area * fi;
     ar += gi.area;
