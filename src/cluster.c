@@ -1408,11 +1408,12 @@ hr_status hr_cluster_export(const hr_solver *s, uint64_t **ids, float **vals, in
   const hr_clusters *cl = s->cl;
   *ids = NULL, *vals = NULL, *n = cl ? cl->nlinks : 0;
   msg_clink *all = NULL;
-  if (!s->dist && cl && *n > 0) { /* in place order */
-    all = malloc((size_t)*n * sizeof *all);
-    if (!all) return HR_ERR_NOMEM;
-    for (int64_t i = 0; i < *n; i++) all[i] = pack(s, &cl->links[i], cl->pos[i]);
-    qsort(all, (size_t)*n, sizeof *all, cmp_msg_pos);
+  scan_rec *ord = NULL; /* one process: the links' indices in place order */
+  if (!s->dist && cl && *n > 0) {
+    ord = malloc((size_t)*n * sizeof *ord);
+    if (!ord) return HR_ERR_NOMEM;
+    for (int64_t i = 0; i < *n; i++) ord[i] = (scan_rec){cl->pos[i], 0, i};
+    qsort(ord, (size_t)*n, sizeof *ord, cmp_scan_rec);
   }
   if (s->dist && cl) { /* everybody's to rank 0, in place order */
     hr_err e2;
@@ -1432,22 +1433,23 @@ hr_status hr_cluster_export(const hr_solver *s, uint64_t **ids, float **vals, in
     qsort(all, (size_t)*n, sizeof *all, cmp_msg_pos);
   }
   if (*n == 0) {
-    free(all);
+    free(all), free(ord);
     return HR_OK;
   }
   *ids = malloc((size_t)*n * 2 * sizeof **ids);
   *vals = malloc((size_t)*n * 8 * sizeof **vals);
   if (!*ids || !*vals) {
-    free(*ids), free(*vals), free(all);
+    free(*ids), free(*vals), free(all), free(ord);
     *ids = NULL, *vals = NULL;
     return HR_ERR_NOMEM;
   }
   for (int64_t i = 0; i < *n; i++) {
-    const msg_clink m = all[i];
+    const int64_t k = ord ? ord[i].from : i;
+    const msg_clink m = ord ? pack(s, &cl->links[k], cl->pos[k]) : all[i];
     (*ids)[2 * i] = m.r, (*ids)[2 * i + 1] = m.s;
     memcpy(*vals + 8 * i, m.v, sizeof m.v);
   }
-  free(all);
+  free(all), free(ord);
   return HR_OK;
 }
 
