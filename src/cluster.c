@@ -714,20 +714,13 @@ typedef struct placed {
   clink l;
 } placed;
 
-/* Link order (see hr_clusters): by receiver, then by place. */
-static int cmp_placed(const void *a, const void *b) {
-  const placed *x = a, *y = b;
-  if (x->l.r != y->l.r) return x->l.r < y->l.r ? -1 : 1;
-  return x->pos < y->pos ? -1 : x->pos > y->pos;
-}
-
-/* The order of a rank's links (see hr_clusters): by receiver, then by place. */
+/* Link order, the order of a rank's links (see hr_clusters): by receiver, then by place. */
 static int link_before(int32_t ra, int64_t pa, int32_t rb, int64_t pb) {
   return ra < rb || (ra == rb && pa < pb);
 }
 
 static int placed_before(const placed *x, const placed *y) {
-  return x->l.r < y->l.r || (x->l.r == y->l.r && x->pos < y->pos);
+  return link_before(x->l.r, x->pos, y->l.r, y->pos);
 }
 
 /* Sorts a[0, n) into link order in place (quicksort: qsort's merge sort takes a copy as large,
@@ -809,13 +802,7 @@ static hr_status reserve(hr_clusters *cl, int64_t n) {
 }
 
 /* Puts all of cl's links in link order. */
-static hr_status sort_links(hr_clusters *cl) {
-  const int64_t n = cl->nlinks;
-  cl->nlinks = 0;
-  const hr_status st = regroup(cl, 0, n);
-  cl->nlinks = n;
-  return st;
-}
+static hr_status sort_links(hr_clusters *cl) { return regroup(cl, 0, cl->nlinks); }
 
 /* The links cur[0, n) at places pos whose receivers other ranks own go there; those that arrive
  * join the others, and all are put in link order. A collective; 'st' is this rank's status so
@@ -867,7 +854,7 @@ static hr_status route(hr_solver *s, clink **pcur, int64_t **ppos, int64_t *pn, 
   }
   free(in);
   if (st == HR_OK) {
-    qsort(all, (size_t)nt, sizeof *all, cmp_placed);
+    sort_placed(all, nt);
     for (int64_t i = 0; i < nt; i++) cur[i] = all[i].l, pos[i] = all[i].pos;
     *pn = nt;
   }
