@@ -21,7 +21,11 @@
 #include <math.h>
 #include <string.h>
 
-/* ncand of a link whose candidate list has not been built yet (initial links). */
+/* ncand of a link whose candidate list has not been built yet (initial links). With clustering
+ * no element link gets a list: their rays go through the scene's BVH (Embree) as the cluster
+ * links' do. The lists' pool, each split link reserving four times its list for its children,
+ * grew to 4.5 GB on the conference room with fine sources (8.0 GB peak; without lists 2.1 GB,
+ * and 148 s instead of 204 s; without fine sources 3.2 -> 1.6 GB, 134 -> 119 s). */
 #define NO_LIST (-1)
 
 /* ---------------------------------------------------------------- growable arrays */
@@ -141,12 +145,12 @@ static double f_small(const hr_ff_elem *r, const hr_ff_elem *j, double fu) {
 
 /* The visible fraction of pair (a, b) from k samples of 'stream': with rays drawn by the kernel
  * where they land often enough (fs, the form factor from the smaller element to the larger, at
- * least HR_VF_LAND_MIN: near pairs), else weighted by it (visfrac.h). Not with clustering, which
- * has no fine sources: the two belong together (alone, the right share of a source's mean made
- * small faces in front of it worse: office 2.9% -> 3.6%, hall:2 clustered 12.2% -> 15.1%). */
+ * least HR_VF_LAND_MIN: near pairs), else weighted by it (visfrac.h). It goes with fine sources
+ * (alone, the right share of a source's mean made small faces in front of it worse: office 2.9%
+ * -> 3.6%, hall:2 clustered 12.2% -> 15.1%). */
 static double pair_h(const hr_solver *s, hr_vf_elem a, hr_vf_elem b, const int32_t *cand,
                      int ncand, int k, int stream, double fs, hr_blockers *blk, int64_t *rays) {
-  if (fs >= HR_VF_LAND_MIN && !s->cl)
+  if (fs >= HR_VF_LAND_MIN)
     return hr_vf_pair_land(&s->vf, a, b, cand, ncand, k, stream, blk, rays);
   return hr_vf_pair(&s->vf, a, b, cand, ncand, k, stream, blk, rays);
 }
@@ -203,7 +207,6 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
  * part of it the receiver sees. The links into a split leaf then refine to its children as any
  * links do (hr_elem_splittable). */
 static int fine_source(const hr_solver *s, const hr_link *l, int32_t j) {
-  if (s->cl) return 0; /* not with clustering yet (docs/design.md, "Fine sources") */
   const hr_elem *r = &s->el[l->r], *e = &s->el[j];
   if (r->parent >= 0 || r->area > s->area_min || e->area <= s->area_min / 16 ||
       e->depth >= HR_GID_DEPTH)
@@ -440,7 +443,7 @@ int hr_link_pair(const hr_solver *s, int32_t i, int32_t j, hr_link *out, int64_t
   const hr_ff_elem gi = hr_elem_geom(s, &s->el[i]), gj = hr_elem_geom(s, &s->el[j]);
   if (!elem_in_front(&gi, &gj) || !elem_in_front(&gj, &gi)) return 0;
   const hr_vf_elem ei = vf_elem(s, i, &gi), ej = vf_elem(s, j, &gj);
-  const double fs = 0; /* clustering: no near-pair estimator (pair_h) */
+  const double fs = near_fs(&gi, &gj);
   const double h = pair_h(s, ei, ej, NULL, -1, pair_rays(s), STREAM_DECIDE, fs, NULL, rays);
   if (h == 0) return 0;
   const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h, fs, NULL, rays);
@@ -562,6 +565,9 @@ static uint8_t decide(const hr_solver *s, const hr_link *l, double bf_e) {
   return ss ? SPLIT_S : rs && er > bf_e ? SPLIT_R : KEEP;
 }
 
+/* Candidates a link carries: none until its list is built (NO_LIST). */
+static int32_t ncands(const hr_link *l) { return l->ncand > 0 ? l->ncand : 0; }
+
 /* Builds the candidate lists that splitting links (dec != KEEP) do not have yet (NO_LIST):
  * shaft queries through the BVH in parallel, then appended to the pool in link order. */
 static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uint8_t *dec) {
@@ -611,8 +617,6 @@ static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uin
 
 /* ---------------------------------------------------------------- distribution */
 
-/* Candidates a link carries: none until its list is built (NO_LIST). */
-static int32_t ncands(const hr_link *l) { return l->ncand > 0 ? l->ncand : 0; }
 
 /* What a ghost of a source needs (see pushpull.c, msg_store): its Bs and bvar, and its
  * children's when it has some. */
@@ -1225,7 +1229,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       if (sl2) slot = sl2;
       else st = HR_ERR_NOMEM;
     }
-    if (st == HR_OK) st = build_lists(s, cur, ncur, dec);
+    if (st == HR_OK && !s->cl) st = build_lists(s, cur, ncur, dec);
     if (st == HR_OK && capmark < s->nel) {
       uint8_t *m = realloc(mark, (size_t)s->nel);
       if (m) mark = m, capmark = s->nel;
@@ -1240,7 +1244,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
         }
         mark[dec[i] == SPLIT_R ? cur[i].r : cur[i].s] = 1;
         slot[i] = nsplit++;
-        nchild_cand += 4 * (int64_t)cur[i].ncand;
+        nchild_cand += 4 * (int64_t)ncands(&cur[i]);
       }
     }
     if (st != HR_OK) st = hr_err_set(err, st, "refinement exceeds a limit or is out of memory");
@@ -1281,7 +1285,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       for (int64_t i = 0; i < ncur; i++)
         if (dec[i] != KEEP) {
           coff[slot[i]] = acc;
-          acc += 4 * (int64_t)cur[i].ncand;
+          acc += 4 * (int64_t)ncands(&cur[i]);
         }
 #pragma omp parallel for schedule(dynamic, 64) reduction(+ : rays) \
     if (nsplit > 16) num_threads(s->threads)
@@ -1294,14 +1298,14 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
           hr_link *cl = &next[4 * slot[i] + k];
           cl->r = dec[i] == SPLIT_R ? first + k : pl->r;
           cl->s = dec[i] == SPLIT_S ? first + k : pl->s;
-          int64_t off = coff[slot[i]] + (int64_t)k * pl->ncand;
+          int64_t off = coff[slot[i]] + (int64_t)k * ncands(pl);
           cl->cand_off = (uint32_t)off;
           hr_vec3 pa[4], pb[4];
           int na = elem_poly(s, &s->el[cl->r], pa), nb = elem_poly(s, &s->el[cl->s], pb);
           /* Children shrink the parent's list to their own shaft. Always worth it (measured):
-           * an emptied list means H = 1 with no rays. */
-          cl->ncand = pl->ncand == 0
-                          ? 0
+           * an emptied list means H = 1 with no rays. Without a list, none. */
+          cl->ncand = pl->ncand <= 0
+                          ? pl->ncand
                           : hr_shaft_filter(s->scene, pa, na, s->el[cl->r].surf, pb, nb,
                                             s->el[cl->s].surf, s->pool + pl->cand_off, pl->ncand,
                                             s->pool + off);
