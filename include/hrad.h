@@ -441,7 +441,10 @@ typedef struct hr_leaf {
   uint32_t lat[4][2];
   hr_vec3 p[4];        /* world positions of the corners */
   double area;
-  double B[3];         /* radiosity, RGB */
+  double B[3];         /* radiosity, RGB: the mean over the leaf, covered parts included */
+  double open;         /* the fraction of its area that nothing covers (0, 1] (a wall behind a
+                          board it touches is covered); 0 counts as 1. Meshes show the open
+                          part's radiosity E + (B - E) / open, weighted by open area */
 } hr_leaf;
 
 /* Copies the current leaves (any order stable for a given solution); caller frees *leaves. */

@@ -444,8 +444,15 @@ static hr_status build_group(build *bd, const hr_scene *s, const int *surfs, int
   for (int64_t i = 0; i < k; i++) {
     const hr_leaf *l = &leaves[idx[i]];
     int ls = slocal[l->surf];
-    /* a tiny weight keeps zero-area leaves meaningful without disturbing real weights */
-    double w = (l->area > 0 && isfinite(l->area)) ? l->area : 1e-300;
+    /* what is seen of the leaf: its open part's radiosity, weighted by the open area (a wall
+     * element half behind a board it touches would otherwise shade the visible wall beside
+     * the board with its mean); a tiny weight keeps zero-area and covered leaves meaningful
+     * without disturbing real weights */
+    const double op = l->open > 0 && l->open <= 1 ? l->open : 1;
+    const double *E = s->mats[s->surfs[l->surf].material].emit;
+    double Bv[3];
+    for (int ch = 0; ch < 3; ch++) Bv[ch] = E[ch] + (l->B[ch] - E[ch]) / op;
+    const double w = (l->area > 0 && isfinite(l->area)) ? fmax(l->area * op, 1e-300) : 1e-300;
     for (int c = 0; c < l->nverts; c++) {
       int ins;
       uint32_t kh;
@@ -461,7 +468,7 @@ static hr_status build_group(build *bd, const hr_scene *s, const int *surfs, int
         bd->wsum[id] = 0;
         bd->nloc++;
       }
-      for (int ch = 0; ch < 3; ch++) bd->val[3 * id + ch] += w * l->B[ch];
+      for (int ch = 0; ch < 3; ch++) bd->val[3 * id + ch] += w * Bv[ch];
       bd->wsum[id] += w;
     }
   }

@@ -708,6 +708,17 @@ static int cmp_gid_leaf(const void *a, const void *b) {
 }
 
 /* This rank's own leaves with their gids, in gid order: '*out' (malloc'd), '*n'. */
+/* The open fraction that element e's sent radiosity Bs rests on (pushpull.c, pp_store: the ray
+ * test's, as far as the element's links agree), from Bs itself: 1 where nothing is covered. */
+static double open_part(const hr_solver *s, int64_t e) {
+  const double *E = s->scene->mats[s->scene->surfs[s->el[e].surf].material].emit;
+  int c = 0;
+  for (int k = 1; k < 3; k++) c = s->Bs[e][k] - E[k] > s->Bs[e][c] - E[c] ? k : c;
+  const double num = s->B[e][c] - E[c], den = s->Bs[e][c] - E[c];
+  const double op = den > 0 ? num / den : 1;
+  return op > 0 && op <= 1 ? op : 1;
+}
+
 static int own_leaves(const hr_solver *s, gid_leaf **out, int64_t *n) {
   *n = count_leaves(s);
   gid_leaf *L = malloc((size_t)(*n > 0 ? *n : 1) * sizeof *L);
@@ -726,6 +737,7 @@ static int own_leaves(const hr_solver *s, gid_leaf **out, int64_t *n) {
     memcpy(l->p, el->p, sizeof l->p);
     l->area = el->area;
     for (int c = 0; c < 3; c++) l->B[c] = s->B[e][c];
+    l->open = open_part(s, e);
   }
   qsort(L, (size_t)*n, sizeof *L, cmp_gid_leaf);
   *out = L;

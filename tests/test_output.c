@@ -1104,6 +1104,36 @@ static void test_split(void) {
   }
 }
 
+/* Meshes show what is seen of a leaf: a wall element half behind a board it touches (open 0.5)
+ * has a mean radiosity of half its open part's, and its vertices beside the board must show the
+ * open part's, as the lit neighbour does (not the mean: a dark smudge next to the board). */
+static void test_open(void) {
+  hr_scene *s;
+  hr_scene_create("open", &s);
+  double rho[3] = {0.5, 0.5, 0.5}, zero[3] = {0, 0, 0};
+  int grey;
+  hr_scene_add_material(s, "grey", rho, zero, &grey);
+  hr_poly_result r;
+  hr_vec3 quad[4] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  CHECK(hr_scene_add_polygon(s, quad, 4, grey, &r) == HR_OK && r == HR_POLY_ADDED, "open add");
+  const uint32_t L = HR_LATTICE, H = HR_LATTICE / 2;
+  hr_leaf lv[2] = {{.surf = 0, .nverts = 4, .lat = {{0, 0}, {H, 0}, {H, L}, {0, L}},
+                    .p = {{0, 0, 0}, {0.5, 0, 0}, {0.5, 1, 0}, {0, 1, 0}}, .area = 0.5,
+                    .B = {0.2, 0.2, 0.2}, .open = 0.5},
+                   {.surf = 0, .nverts = 4, .lat = {{H, 0}, {L, 0}, {L, L}, {H, L}},
+                    .p = {{0.5, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0.5, 1, 0}}, .area = 0.5,
+                    .B = {0.4, 0.4, 0.4}, .open = 0}}; /* 0: not given, counts as wholly open */
+  hr_mesh *m = NULL;
+  CHECK(hr_mesh_build(s, lv, 2, &m) == HR_OK && m, "open mesh");
+  double worst = 0;
+  for (int64_t v = 0; m && v < m->nverts; v++)
+    for (int c = 0; c < 3; c++) worst = fmax(worst, fabs(m->B[3 * v + c] - 0.4));
+  CHECK(m && m->nverts >= 6 && worst < 1e-6, "open parts: %lld vertices, off by %g",
+        m ? (long long)m->nverts : 0LL, worst);
+  hr_mesh_destroy(&m);
+  hr_scene_destroy(&s);
+}
+
 /* ------------------------------------------------------------------ performance */
 
 static int refine_room(int surf, double a0, double b0, double s, int depth) {
@@ -1193,6 +1223,7 @@ int main(void) {
     return 1;
   }
   printf("output directory %s\n", dir);
+  test_open();
   hr_scene *s = make_scene();
   leafvec lv = {0};
   gen_all(s, &lv, refine_main, field);
