@@ -617,7 +617,6 @@ static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uin
 
 /* ---------------------------------------------------------------- distribution */
 
-
 /* What a ghost of a source needs (see pushpull.c, msg_store): its Bs and bvar, and its
  * children's when it has some. */
 typedef struct src_state {

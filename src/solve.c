@@ -707,7 +707,6 @@ static int cmp_gid_leaf(const void *a, const void *b) {
   return x->gid < y->gid ? -1 : x->gid > y->gid;
 }
 
-/* This rank's own leaves with their gids, in gid order: '*out' (malloc'd), '*n'. */
 /* The open fraction that element e's sent radiosity Bs rests on (pushpull.c, pp_store: the ray
  * test's, as far as the element's links agree), from Bs itself: 1 where nothing is covered. */
 static double open_part(const hr_solver *s, int64_t e) {
@@ -719,6 +718,7 @@ static double open_part(const hr_solver *s, int64_t e) {
   return op > 0 && op <= 1 ? op : 1;
 }
 
+/* This rank's own leaves with their gids, in gid order: '*out' (malloc'd), '*n'. */
 static int own_leaves(const hr_solver *s, gid_leaf **out, int64_t *n) {
   *n = count_leaves(s);
   gid_leaf *L = malloc((size_t)(*n > 0 ? *n : 1) * sizeof *L);
