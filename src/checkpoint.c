@@ -23,7 +23,7 @@
 #include <string.h>
 
 #define MAGIC "HRADCKP1"
-#define VERSION 5u
+#define VERSION 6u
 
 /* ---------------------------------------------------------------- hashing */
 
@@ -78,7 +78,7 @@ static void put(writer *w, const void *p, size_t n) {
 
 /* The progress of Figure 3. */
 typedef struct progress {
-  int32_t iterations, converged, done, stopped;
+  int32_t iterations, converged, done, stopped, lazy, pad;
   double bf_e, unit, prev_change, prev_abs;
   int64_t stall, rays, initial_links;
   hr_timing t;
@@ -255,7 +255,7 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
   /* counts over all ranks */
   const int64_t rays = s->dist ? s->g_rays : s->rays;
   const int64_t init = s->dist ? s->g_initial : s->initial_links;
-  progress pr = {s->iterations, s->converged, s->done,  s->stopped,
+  progress pr = {s->iterations, s->converged, s->done,  s->stopped, s->lazy, 0,
                  s->bf_e,       s->unit,      s->prev_change, s->prev_abs,
                  s->stall,      rays,         init,           s->t};
   put(&w, &pr, sizeof pr);
@@ -551,7 +551,8 @@ static hr_status resume(hr_solver *s, const char *path, hr_err *err) {
   free(buf);
   if (st != HR_OK) return st;
   s->iterations = pr.iterations, s->converged = pr.converged, s->done = pr.done;
-  s->stopped = pr.stopped, s->bf_e = pr.bf_e, s->unit = pr.unit, s->rays = pr.rays;
+  s->stopped = pr.stopped, s->lazy = pr.lazy, s->bf_e = pr.bf_e, s->unit = pr.unit;
+  s->rays = pr.rays;
   s->prev_change = pr.prev_change, s->prev_abs = pr.prev_abs, s->stall = pr.stall;
   s->initial_links = pr.initial_links, s->t = pr.t;
   s->started = 1;

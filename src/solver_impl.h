@@ -58,6 +58,10 @@ typedef struct hr_link {
   int32_t ncand;
 } hr_link;
 
+/* hr_solver.lazy: refine at every iteration; gather until B converges, then refine; or
+ * refinement has settled at this BF_e (docs/design.md, "Lazy refinement"). */
+enum { HR_REFINE_EVERY, HR_REFINE_LAZY, HR_REFINE_SETTLED };
+
 struct hr_solver {
   const hr_scene *scene;
   hr_options opt;
@@ -121,6 +125,8 @@ struct hr_solver {
   double prev_change; /* the last iteration's change at BF_low if it made no links, else 0 */
   double prev_abs;    /* the last iteration's largest change of B (absolute) */
   int64_t stall;      /* iterations in a row without new links whose change did not shrink */
+  int lazy;           /* HR_REFINE_*: whether the next iteration refines (solve.c) */
+  int refined;        /* the last iteration refined */
   /* counters */
   int64_t rays, initial_links;
   int iterations, converged, threads;
@@ -167,15 +173,18 @@ struct hr_solver {
   double t_bal_last;  /* seconds the last balancing took on this rank (with its migration) */
   uint64_t migrate_seed; /* test hook HRAD_TEST_MIGRATE=SEED: new random owners every iteration */
   /* Test hook (HRAD_TEST_FAIL=RANK:PHASE:ITER, read by hr_solver_set_dist): rank 'fail_rank'
-   * fails with "out of memory" in phase fail_phase (HR_PHASE_*) of iteration fail_iter. */
+   * fails with "out of memory" in phase fail_phase (HR_PHASE_*) of iteration fail_iter (the
+   * refinement phases: of the first iteration from fail_iter on that refines, solve.c). */
   int fail_rank, fail_phase, fail_iter;
 };
 
 enum { HR_PHASE_NONE, HR_PHASE_INIT, HR_PHASE_REFINE, HR_PHASE_PUSHPULL, HR_PHASE_CLUSTER };
 /* 1 if the test hook makes this rank fail now, in 'phase'. */
 static inline int hr_test_fail(const hr_solver *s, int phase) {
+  const int it = s->iterations + 1;
   return s->fail_phase == phase && s->rank == s->fail_rank &&
-         (phase == HR_PHASE_INIT || s->iterations + 1 == s->fail_iter);
+         (phase == HR_PHASE_INIT || it == s->fail_iter ||
+          (phase != HR_PHASE_PUSHPULL && it > s->fail_iter));
 }
 
 /* 1 if this rank owns element 'e' (always in one process). */
