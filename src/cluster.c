@@ -341,11 +341,12 @@ static hr_vec3 node_point(const hr_solver *s, int32_t id, const double u[3], hr_
   if (id < 0) {
     const cnode *nd = &cl->node[-1 - id];
     const double t = cl->cum[nd->lo] + u[0] * (cl->cum[nd->hi] - cl->cum[nd->lo]);
-    int32_t lo = nd->lo, hi = nd->hi - 1; /* the last k with cum[k] <= t */
-    while (lo < hi) {
-      int32_t m = lo + (hi - lo + 1) / 2;
-      if (cl->cum[m] <= t) lo = m;
-      else hi = m - 1;
+    /* the last k in [lo, hi) with cum[k] <= t (cum[lo] <= t always), without branches */
+    int32_t lo = nd->lo, len = nd->hi - nd->lo;
+    while (len > 1) {
+      const int32_t h = len / 2;
+      lo = cl->cum[lo + h] <= t ? lo + h : lo;
+      len -= h;
     }
     const csurf *q = &cl->sp[lo];
     p = q->v, nv = q->nv, *n = q->n;
@@ -368,7 +369,15 @@ static clink fresh(int32_t r, int32_t sn) { return (clink){r, sn, -1, 0, {0, 0, 
 
 #define CL_RAYS_MAX 64
 
-static inline double unit_of(uint64_t h) { return (double)(h >> 11) * 0x1.0p-53; }
+/* The six uniforms of draw q of the pair keyed 'key', 21 bits each (at the centres of 2^21
+ * equal bins) from two mixes (six hashes of four mixes each: 4% of the conference room's
+ * profile, and most of draw's own 6%). */
+static inline void six_units(uint64_t key, uint64_t q, double u[6]) {
+  const uint64_t h[2] = {u64_mix(key ^ (q * UINT64_C(0x9e3779b97f4a7c15))),
+                         u64_mix(key + (q + 1) * UINT64_C(0xd1b54a32d192ed03))};
+  for (int j = 0; j < 6; j++)
+    u[j] = ((double)((h[j / 3] >> (21 * (j % 3))) & 0x1fffff) + 0.5) * 0x1.0p-21;
+}
 
 static int link_rays(const hr_solver *s) {
   const int k = s->opt.rays / 2;
@@ -390,7 +399,7 @@ static int draw(const hr_solver *s, int32_t r, int32_t sn, int k, int stream, do
   int m = 0, q = 0;
   for (; q < 8 * k && m < k; q++) {
     double u[6];
-    for (int j = 0; j < 6; j++) u[j] = unit_of(hr_hash4(key, (uint64_t)q, (uint64_t)j, 0));
+    six_units(key, (uint64_t)q, u);
     hr_vec3 nx, ny;
     const hr_vec3 x = node_point(s, r, u, &nx), y = node_point(s, sn, u + 3, &ny);
     const hr_vec3 dv = v3_sub(y, x);
