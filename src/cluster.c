@@ -40,6 +40,8 @@ typedef struct cnode {
   int32_t lo, hi;   /* surfaces perm[lo, hi) */
   hr_vec3 bmin, bmax, c;
   double rad, area;
+  hr_vec3 na;  /* normal cone: the surfaces' normals lie within angle nang of axis na */
+  double nang;
 } cnode;
 
 /* A surface as node_point draws from it, in the hierarchy's order (one cache miss, not three). */
@@ -186,6 +188,24 @@ static int32_t build(builder *b, int32_t lo, int32_t hi) {
 }
 
 /* Boxes, spheres, areas, reflectances and N_lm, children before parents. */
+static double acos_clamped(double x) { return acos(x < -1 ? -1 : x > 1 ? 1 : x); }
+
+/* The normal cone of n surfaces: the axis of their area-weighted mean normal (any, with angle
+ * pi, where that is 0) and the largest angle of a normal from it. */
+static void normal_cone(const hr_clusters *cl, int32_t lo, int32_t hi, hr_vec3 *axis,
+                        double *ang) {
+  hr_vec3 m = {0, 0, 0};
+  for (int32_t k = lo; k < hi; k++)
+    m = v3_add(m, v3_scale(cl->sp[k].n, cl->cum[k + 1] - cl->cum[k]));
+  const double ml = v3_len(m);
+  *axis = ml > 0 ? v3_scale(m, 1 / ml) : v3(0, 0, 1);
+  *ang = ml > 0 ? 0 : M_PI;
+  for (int32_t k = lo; k < hi && ml > 0; k++) {
+    const double a = acos_clamped(v3_dot(cl->sp[k].n, *axis));
+    *ang = a > *ang ? a : *ang;
+  }
+}
+
 static void summarise(hr_solver *s, hr_clusters *cl) {
   const hr_scene *sc = s->scene;
   for (int32_t c = cl->n - 1; c >= 0; c--) {
@@ -218,6 +238,7 @@ static void summarise(hr_solver *s, hr_clusters *cl) {
     }
     nd->c = v3_scale(v3_add(nd->bmin, nd->bmax), 0.5);
     nd->rad = 0.5 * v3_len(v3_sub(nd->bmax, nd->bmin));
+    normal_cone(cl, nd->lo, nd->hi, &nd->na, &nd->nang);
   }
 }
 
@@ -941,6 +962,35 @@ static int recv_whole(const hr_solver *s, const clink *l) {
   return l->kv <= KV_RECV || s->cl->node[-1 - l->r].area <= s->area_min;
 }
 
+/* The normal cone of node id (an element: its surface's normal). */
+static void node_cone(const hr_solver *s, int32_t id, hr_vec3 *axis, double *ang) {
+  if (id >= 0) {
+    *axis = s->scene->surfs[s->el[id].surf].normal, *ang = 0;
+  } else {
+    *axis = s->cl->node[-1 - id].na, *ang = s->cl->node[-1 - id].nang;
+  }
+}
+
+/* 0 when no surface of one node of link l faces any point of the other's bounding sphere: the
+ * kernel is 0 throughout and the link carries nothing. The directions between the two spheres
+ * lie within phi of the centres' direction u; a normal within ang of axis faces one of them
+ * when the angle between axis and u is below pi/2 + ang + phi. Exact culling: in the
+ * conference room 15% of cluster estimates found no pair facing in 8k draws. */
+static int cones_face(const hr_solver *s, const clink *l) {
+  hr_vec3 cr, cs, ar, as;
+  double rr, rs, xr, xs, tr, ts;
+  node_sphere(s, l->r, &cr, &rr, &xr);
+  node_sphere(s, l->s, &cs, &rs, &xs);
+  const hr_vec3 d = v3_sub(cs, cr);
+  const double dl = v3_len(d);
+  if (!(dl > rr + rs)) return 1;
+  const double phi = asin((rr + rs) / dl) + 1e-6, lim = 0.5 * M_PI + phi;
+  const hr_vec3 u = v3_scale(d, 1 / dl);
+  node_cone(s, l->r, &ar, &tr);
+  node_cone(s, l->s, &as, &ts);
+  return acos_clamped(v3_dot(ar, u)) < lim + tr && acos_clamped(-v3_dot(as, u)) < lim + ts;
+}
+
 /* The oracle's geometry of link l (fb, kv), once. */
 static void link_geometry(const hr_solver *s, clink *l) {
   hr_vec3 cr, cs;
@@ -967,6 +1017,7 @@ static int decide(const hr_solver *s, clink *l, double bf_e) {
       const cnode *nd = &cl->node[-1 - l->r];
       if (box_behind(&sc->surfs[s->el[l->s].surf], nd->bmin, nd->bmax, tol)) return C_DROP;
     }
+    if (!cones_face(s, l)) return C_DROP;
     link_geometry(s, l);
   }
   double mean, range, rho, bref;
