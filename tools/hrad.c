@@ -136,6 +136,7 @@ static atomic_int g_stop;         /* the first signal received, 0 if none */
  * so an error there is met by all of them at once and they can leave MPI in order; an error in
  * rank 0's own work (outputs) ends it alone, and mpirun then ends the others. */
 static hr_dist *g_dist;
+static int g_ranks = 1; /* stays when g_dist is finished: a SIGTERM can come after that */
 static int g_rank, g_together = 1;
 
 /* Leaves MPI (if in it) and exits. */
@@ -668,7 +669,7 @@ static void *sig_thread(void *arg) {
       atomic_store(&g_stop, sig);
       /* mpirun passes a signal to every rank: one line, from rank 0; and a SIGTERM under
        * mpirun is mpirun ending the job after another rank failed, which that rank reported */
-      if (g_rank == 0 && !(g_dist && sig == SIGTERM))
+      if (g_rank == 0 && !(g_ranks > 1 && sig == SIGTERM))
         say("hrad: interrupted by %s: stopping without writing outputs (once more to stop at "
             "once)",
             sig_name(sig));
@@ -2050,6 +2051,7 @@ int main(int argc, char **argv) {
       return 1;
     }
     g_rank = hr_dist_rank(g_dist);
+    g_ranks = hr_dist_size(g_dist);
   }
   parse_args(&c, argc, argv);
   c.snap_collect = c.snapshots && hr_dist_size(g_dist) > 1;
