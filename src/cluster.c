@@ -57,7 +57,7 @@ typedef struct clink {
   float d[3];   /* unit direction from the receiver's centre to the source's */
   /* The oracle's geometry, computed once: the form-factor bound, how much the kernel varies
    * over the two nodes (both < 0 until first decided) and twice the unoccluded estimate (< 0
-   * until needed). */
+   * until needed); kv's sign says whether the source is far (far_source). */
   float fb, kv, fu2;
 } clink;
 
@@ -74,7 +74,13 @@ struct hr_clusters {
   double (*Bm)[3];    /* per cluster: area-weighted mean of its surfaces' sent radiosity */
   double *bhi, *blo;  /* per cluster: range of its surfaces' radiosities (largest channel) */
   double *bref;       /* per cluster: area-weighted mean reference radiosity of its surfaces */
-  double (*L)[NCH][9]; /* per cluster: incident field, A_l-weighted */
+  /* per cluster: incident field, A_l-weighted, from near sources [0] (taken by each surface
+   * with Y_lm(n)) and far ones [1] (taken with its transfer vector) */
+  double (*L)[2][NCH][9];
+  /* Transfer (docs/design.md, "Clustering"): per surface root, Y_lm(n) less what nearby
+   * geometry hides (tq); per cluster, N_lm from those (nsht) and how far its surfaces' rays
+   * looked (lray); NULL until the ray caster exists */
+  double (*tq)[9], (*nsht)[9], *lray;
   int initial;        /* before the first pull: reference radiosities are the floor */
   /* The links and, per link, its place: where it stands in the order in which refinement makes
    * links (the first round's kept links in their order, then each later round's, a round's
@@ -440,6 +446,113 @@ static int draw(const hr_solver *s, int32_t r, int32_t sn, int k, int stream, do
   return m;
 }
 
+/* ---------------------------------------------------------------- transfer
+ *
+ * A cluster that receives as one gives each surface its share by orientation. Geometry close
+ * to a surface hides part of its sky: the seat under a chair's arm, the inside of a cabinet.
+ * Each surface root carries its transfer vector: Y_lm(n) less the SH projection of what
+ * TRANSFER_RAYS cosine-distributed rays from it find hidden within lray, the width of the
+ * largest cluster of at most A_e above it (the largest that receives as one by size; larger
+ * ones do only from ten times their size, where visibility between the two is the link's). The
+ * hidden part is subtracted, so an open surface keeps Y_lm(n) exactly. Light from sources
+ * farther than lray from the receiving cluster reaches its surfaces through their transfer
+ * vectors; nearer sources (a lamp inside its housing, which the rays toward it would find
+ * hidden behind the far side of the housing) through Y_lm(n). */
+#define TRANSFER_RAYS 64
+
+/* 1 when link l's source lies farther from its receiving cluster than the cluster's surfaces'
+ * transfer rays reach (link_geometry: the sign of kv). */
+static int far_source(const clink *l) { return signbit(l->kv) != 0; }
+/* How much the kernel varies over the two nodes of link l (link_geometry). */
+static float kv_of(const clink *l) { return fabsf(l->kv); }
+
+/* Surface id's transfer vector from rays of length len (0: Y_lm(n)). */
+static void transfer_vector(const hr_solver *s, int32_t id, double len, double t[9]) {
+  const hr_surface *f = &s->scene->surfs[id];
+  const double n[3] = {f->normal.x, f->normal.y, f->normal.z};
+  hr_sh9(n, t);
+  if (!(len > 0)) return;
+  const hr_vec3 e1 = v3_norm(v3_cross(f->normal, fabs(f->normal.x) < 0.9 ? v3(1, 0, 0)
+                                                                          : v3(0, 1, 0)));
+  const hr_vec3 e2 = v3_cross(f->normal, e1);
+  const uint64_t key = hr_hash4(s->opt.seed, node_gid(s, id), 0, 29);
+  float org[TRANSFER_RAYS * 3], dst[TRANSFER_RAYS * 3];
+  hr_vec3 dir[TRANSFER_RAYS];
+  uint8_t vis[TRANSFER_RAYS];
+  for (int q = 0; q < TRANSFER_RAYS; q++) {
+    double u[6];
+    hr_vec3 nx;
+    six_units(key, (uint64_t)q, u);
+    const hr_vec3 x = node_point(s, id, u, &nx);
+    /* cosine-distributed about n, stratified in the azimuth */
+    const double r = sqrt(u[3]), ph = 2 * M_PI * (q + u[4]) / TRANSFER_RAYS;
+    dir[q] = v3_add(v3_add(v3_scale(e1, r * cos(ph)), v3_scale(e2, r * sin(ph))),
+                    v3_scale(f->normal, sqrt(1 - u[3])));
+    const hr_vec3 o = v3_add(x, v3_scale(f->normal, s->vf.lift)),
+                  e = v3_add(o, v3_scale(dir[q], len));
+    org[3 * q] = (float)o.x, org[3 * q + 1] = (float)o.y, org[3 * q + 2] = (float)o.z;
+    dst[3 * q] = (float)e.x, dst[3 * q + 1] = (float)e.y, dst[3 * q + 2] = (float)e.z;
+  }
+  hr_vis_segments(s->vis, TRANSFER_RAYS, org, dst, -1, -1, vis);
+  for (int q = 0; q < TRANSFER_RAYS; q++) {
+    if (vis[q]) continue;
+    const double d[3] = {dir[q].x, dir[q].y, dir[q].z};
+    double y[9];
+    hr_sh9(d, y);
+    /* E_cos[Y_lm] = A_l Y_lm(n) / pi over the cosine distribution */
+    for (int k = 0; k < 9; k++) t[k] -= M_PI / hr_sh_alpha[k] * y[k] / TRANSFER_RAYS;
+  }
+}
+
+static hr_status transfer_init(hr_solver *s) {
+  hr_clusters *cl = s->cl;
+  const int32_t ns = s->scene->nsurfs, nc = cl->n;
+  const double ae = s->area_min;
+  double *ls = malloc((size_t)(ns > 0 ? ns : 1) * sizeof *ls);
+  cl->tq = malloc((size_t)(ns > 0 ? ns : 1) * sizeof *cl->tq);
+  cl->nsht = calloc((size_t)(nc > 0 ? nc : 1), sizeof *cl->nsht);
+  cl->lray = calloc((size_t)(nc > 0 ? nc : 1), sizeof *cl->lray);
+  if (!ls || !cl->tq || !cl->nsht || !cl->lray) {
+    free(ls);
+    return HR_ERR_NOMEM;
+  }
+  for (int32_t i = 0; i < ns; i++) ls[i] = 0;
+  /* preorder: the width of the largest cluster of at most A_e above each node */
+  for (int32_t c = 0; c < nc; c++) {
+    const cnode *nd = &cl->node[c];
+    if (cl->lray[c] == 0 && nd->area <= ae) cl->lray[c] = 2 * nd->rad;
+    for (int q = 0; q < 2; q++) {
+      const int32_t id = nd->child[q];
+      if (id < 0) cl->lray[-1 - id] = cl->lray[c];
+      else ls[id] = cl->lray[c];
+    }
+  }
+  /* a cluster above A_e: its surfaces' rays reach at most its own width */
+  for (int32_t c = 0; c < nc; c++)
+    if (cl->lray[c] == 0) cl->lray[c] = 2 * cl->node[c].rad;
+  /* (their rays are not in s->rays: a resumed run casts them again) */
+#pragma omp parallel for schedule(dynamic, 64) num_threads(s->threads)
+  for (int32_t i = 0; i < ns; i++) transfer_vector(s, i, ls[i], cl->tq[i]);
+  free(ls);
+  /* N_lm from the transfer vectors, from the leaves up */
+  for (int32_t c = nc - 1; c >= 0; c--) {
+    for (int q = 0; q < 2; q++) {
+      const int32_t id = cl->node[c].child[q];
+      const double *t = id < 0 ? cl->nsht[-1 - id] : cl->tq[id];
+      const double a = id < 0 ? 1 : s->el[id].area;
+      for (int k = 0; k < 9; k++) cl->nsht[c][k] += a * t[k];
+    }
+  }
+  return HR_OK;
+}
+
+hr_status hr_cluster_prepare(hr_solver *s, hr_err *err) {
+  if (!s->cl || s->cl->tq) return HR_OK;
+  if (transfer_init(s) != HR_OK)
+    return hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters");
+  return HR_OK;
+}
+
 /* Links between nodes of at most this many surface pairs get their unoccluded form factor as
  * the sum over the pairs of the exact form factors (quadrature on the receiver)
  * where they are near (the point kernel then varies too much for a few samples: measured on a
@@ -497,7 +610,7 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn) {
  * (measured on a tessellated furnace at a gap of 2 radii: single links 2x off). */
 #define NEAR_KV 0.2f
 
-static int near_pair(const clink *l) { return l->kv >= NEAR_KV; }
+static int near_pair(const clink *l) { return kv_of(l) >= NEAR_KV; }
 
 /* The kernel's regularisation pi r^2 + reg: A_S / k for near nodes, where one sample pair can
  * come arbitrarily close, else 0 (a term of A_S / k biased far links from large sources low:
@@ -569,11 +682,14 @@ static void estimate(const hr_solver *s, clink *l, int weak, int64_t *rays) {
   l->kf = 0;
   if (l->r < 0 && f > 0) {
     const double dd[3] = {d.x, d.y, d.z};
+    const double *N = far_source(l) ? cl->nsht[-1 - l->r] : cl->nsh[-1 - l->r];
     double y[9], D = 0;
     hr_sh9(dd, y);
-    for (int q = 0; q < 9; q++) D += hr_sh_alpha[q] * y[q] * cl->nsh[-1 - l->r][q];
-    /* the receiver's surfaces hardly face d in the model: spread the power evenly (kf < 0) */
-    l->kf = D > ISO_MIN * ar ? (float)(f * ar / D) : (float)(-4 * f);
+    for (int q = 0; q < 9; q++) D += hr_sh_alpha[q] * y[q] * N[q];
+    /* the receiver's surfaces hardly face d in the model: spread the power evenly over their
+     * open area (kf < 0) */
+    const double aop = N[0] / 0.282095;
+    l->kf = D > ISO_MIN * ar ? (float)(f * ar / D) : aop > 0 ? (float)(-4 * f * ar / aop) : 0;
   }
 }
 
@@ -959,7 +1075,7 @@ static int node_splittable(const hr_solver *s, int32_t id) {
  * within BF_e; they add up, all of one sign for a given triangle. */
 #define KV_RECV 0.1f
 static int recv_whole(const hr_solver *s, const clink *l) {
-  return l->kv <= KV_RECV || s->cl->node[-1 - l->r].area <= s->area_min;
+  return kv_of(l) <= KV_RECV || s->cl->node[-1 - l->r].area <= s->area_min;
 }
 
 /* The normal cone of node id (an element: its surface's normal). */
@@ -991,7 +1107,7 @@ static int cones_face(const hr_solver *s, const clink *l) {
   return acos_clamped(v3_dot(ar, u)) < lim + tr && acos_clamped(-v3_dot(as, u)) < lim + ts;
 }
 
-/* The oracle's geometry of link l (fb, kv), once. */
+/* The oracle's geometry of link l (fb, kv, and whether its source is far: kv's sign), once. */
 static void link_geometry(const hr_solver *s, clink *l) {
   hr_vec3 cr, cs;
   double rr, rs, ar, as;
@@ -1000,6 +1116,7 @@ static void link_geometry(const hr_solver *s, clink *l) {
   const double gap = v3_len(v3_sub(cr, cs)) - rr - rs;
   l->fb = (float)(gap > 0 ? fmin(1, as / (M_PI * gap * gap)) : 1);
   l->kv = (float)(gap > 0 ? fmin(1, (rr + rs) / gap) : 1);
+  if (l->r < 0 && gap > s->cl->lray[-1 - l->r]) l->kv = -l->kv;
 }
 
 /* Keep, drop, split a side, or make it an element link. */
@@ -1024,7 +1141,7 @@ static int decide(const hr_solver *s, clink *l, double bf_e) {
   node_b(s, l->s, &mean, &range);
   node_recv(s, l->r, &rho, &bref);
   double lim = bf_e * bref;
-  const double b = mean * l->kv + range;
+  const double b = mean * kv_of(l) + range;
   if (l->r < 0 && !recv_whole(s, l)) lim = 0;
   if (rho * l->fb * b <= lim) return rho * l->fb * b <= 0.25 * lim ? C_WEAK : C_KEEP;
   hr_vec3 cr, cs;
@@ -1310,7 +1427,7 @@ static inline void gather_link(hr_solver *s, const clink *l) {
   }
   if (l->kf == 0) return;
   const double d[3] = {l->d[0], l->d[1], l->d[2]}, v[NCH] = {b[0], b[1], b[2], mean, 1};
-  double(*L)[9] = cl->L[-1 - l->r];
+  double(*L)[9] = cl->L[-1 - l->r][far_source(l)];
   if (l->kf < 0) { /* even: E(n) = L_00 Y_00 = -kf v / 4 for every n */
     for (int c = 0; c < NCH; c++) L[c][0] += -l->kf * hr_sh_alpha[0] * 0.282095 * v[c];
     return;
@@ -1341,6 +1458,7 @@ void hr_cluster_gather(hr_solver *s) {
   hr_clusters *cl = s->cl;
   if (!cl) return;
   memset(cl->L, 0, (size_t)cl->n * sizeof *cl->L);
+  assert(cl->tq); /* hr_cluster_prepare */
   /* chunks of whole receivers in parallel, each receiver's links in place order: the same sums
    * as one pass over the list, on any number of threads */
   const int64_t nch = (cl->nlinks + CHUNK - 1) / CHUNK;
@@ -1351,7 +1469,7 @@ void hr_cluster_gather(hr_solver *s) {
   }
   /* distributed: each cluster's field is summed on the rank that holds its links, zeros
    * elsewhere (x + 0 == x); all of them on every rank */
-  if (s->dist) hr_dist_sum_f64(s->dist, &cl->L[0][0][0], (int64_t)cl->n * NCH * 9);
+  if (s->dist) hr_dist_sum_f64(s->dist, &cl->L[0][0][0][0], (int64_t)cl->n * 2 * NCH * 9);
   /* push: preorder, so a parent's field is complete before its children take it; every rank
    * pushes alike and adds what reaches its own roots */
   for (int32_t c = 0; c < cl->n; c++) {
@@ -1359,9 +1477,10 @@ void hr_cluster_gather(hr_solver *s) {
     for (int q = 0; q < 2; q++) {
       const int32_t id = nd->child[q];
       if (id < 0) {
-        double(*L)[9] = cl->L[-1 - id];
-        for (int ch = 0; ch < NCH; ch++)
-          for (int k = 0; k < 9; k++) L[ch][k] += cl->L[c][ch][k];
+        double(*L)[NCH][9] = cl->L[-1 - id];
+        for (int f = 0; f < 2; f++)
+          for (int ch = 0; ch < NCH; ch++)
+            for (int k = 0; k < 9; k++) L[f][ch][k] += cl->L[c][f][ch][k];
         continue;
       }
       if (!hr_owns(s, id)) continue;
@@ -1371,7 +1490,8 @@ void hr_cluster_gather(hr_solver *s) {
       hr_sh9(n, y);
       for (int ch = 0; ch < NCH; ch++) {
         double x = 0;
-        for (int k = 0; k < 9; k++) x += cl->L[c][ch][k] * y[k];
+        for (int k = 0; k < 9; k++)
+          x += cl->L[c][0][ch][k] * y[k] + cl->L[c][1][ch][k] * cl->tq[id][k];
         e[ch] = x > 0 ? x : 0;
       }
       for (int ch = 0; ch < 3; ch++) s->G[id][ch] += e[ch];
@@ -1431,6 +1551,7 @@ hr_status hr_cluster_init(hr_solver *s, hr_err *err) {
   else if (hr_test_fail(s, HR_PHASE_INIT))
     st = hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters (injected by "
                                        "HRAD_TEST_FAIL)");
+  else st = hr_cluster_prepare(s, err);
   if ((st = hr_dist_agree(s, st, err)) != HR_OK) return st;
   hr_clusters *cl = s->cl;
   hr_cluster_pull(s); /* radiosities: the emission */
@@ -1535,7 +1656,8 @@ void hr_cluster_free(hr_clusters **pc) {
   if (!cl) return;
   free(cl->node), free(cl->perm), free(cl->cum), free(cl->sp), free(cl->srad), free(cl->nsh);
   free(cl->rho);
-  free(cl->Bm), free(cl->bhi), free(cl->blo), free(cl->bref), free(cl->L), free(cl->links);
+  free(cl->Bm), free(cl->bhi), free(cl->blo), free(cl->bref), free(cl->L), free(cl->tq);
+  free(cl->nsht), free(cl->lray), free(cl->links);
   free(cl->pos);
   free(cl);
   *pc = NULL;

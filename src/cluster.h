@@ -22,6 +22,9 @@ int hr_cluster_wanted(const hr_options *o, int nsurfs);
 
 /* Builds the hierarchy over the scene's surfaces and the root's self-link, and refines the
  * cluster links at the first BF_e (element links between surfaces go to s->links). */
+/* What the iterations need beyond the hierarchy and links (the surfaces' transfer vectors):
+ * once the ray caster exists; nothing without clusters. */
+hr_status hr_cluster_prepare(hr_solver *s, hr_err *err);
 hr_status hr_cluster_init(hr_solver *s, hr_err *err);
 /* One refinement pass of the cluster links at 'bf_e'; adds the new links (cluster and element)
  * to '*nnew'. New element links make the next hr_link_sort a full one. */

@@ -393,7 +393,7 @@ static hr_status prepare(hr_solver *s, hr_err *err) {
   if (!s->shaft && (st = hr_shaft_index_create(s->scene, &s->shaft)) != HR_OK)
     return hr_err_set(err, st, "cannot build the shaft-culling hierarchy");
   s->vf.vis = s->vis;
-  return HR_OK;
+  return hr_cluster_prepare(s, err);
 }
 
 /* One iteration of Figure 3 at s->bf_e ({7..15}): refinement (not in the first iteration, which
