@@ -619,15 +619,18 @@ static double link_reg(const clink *l, double as, int k) { return near_pair(l) ?
 
 /* The unoccluded form factor of link (r <- sn): exact for small near links (-1 for larger
  * near ones), else from the decision stream's point pairs, without rays. */
-static double unoccluded(const hr_solver *s, const clink *l, double as) {
-  if (near_pair(l)) /* -1 (no estimate) without the exact value: a few samples of a near pair */
-    return exact_unoccluded(s, l->r, l->s); /* were measured up to 13x low */
+static double sampled_unoccluded(const hr_solver *s, const clink *l, double as) {
   double w[CL_RAYS_MAX], f = 0;
   int nd;
   const int k = link_rays(s);
   const int m = draw(s, l->r, l->s, k, 1, link_reg(l, as, k), w, NULL, NULL, &nd);
   for (int q = 0; q < m; q++) f += w[q];
   return nd > 0 ? f * as / nd : 0;
+}
+static double unoccluded(const hr_solver *s, const clink *l, double as) {
+  if (near_pair(l)) /* -1 (no estimate) without the exact value: a few samples of a near pair */
+    return exact_unoccluded(s, l->r, l->s); /* were measured up to 13x low */
+  return sampled_unoccluded(s, l, as);
 }
 
 /* Below this normalisation (per unit receiver area; 1/4 for an even spread) a cluster link's
@@ -1150,6 +1153,11 @@ static int decide(const hr_solver *s, clink *l, double bf_e) {
   node_sphere(s, l->s, &cs, &rs, &as);
   /* Near clusters: the bound says nothing (1 where the spheres meet), so the unoccluded form
    * factor from the link's own point pairs, doubled for its noise, stands in for it. */
+  /* A near link that must open unless nothing of it faces (a cluster that may not receive as
+   * one: lim = 0) opens once one of its sampled pairs faces, without the exact value, which is
+   * positive too unless its quadrature points all miss the facing part (then the link was kept
+   * with nothing). Clustered museum: 0.97x the wall time (0.95-1.06, three paired runs). */
+  if (l->fu2 < 0 && lim == 0 && near_pair(l) && sampled_unoccluded(s, l, as) > 0) l->fu2 = 2;
   if (l->fu2 < 0) {
     const double fu = unoccluded(s, l, as);
     l->fu2 = fu >= 0 ? (float)(2 * fu) : 2; /* 2: no estimate (never below fb <= 1) */
