@@ -399,6 +399,17 @@ static int refine_deep(int surf, double a0, double b0, double s, int depth) {
   return contains(a0, b0, s, 0.5 - 1e-9, 0.3);
 }
 
+/* A scene of one grey quad q (material 0, polygon 0); *r: how the quad was added. */
+static hr_scene *grey_quad(const char *name, const hr_vec3 q[4], hr_poly_result *r) {
+  hr_scene *s;
+  hr_scene_create(name, &s);
+  double rho[3] = {0.5, 0.5, 0.5}, zero[3] = {0, 0, 0};
+  int grey;
+  hr_scene_add_material(s, "grey", rho, zero, &grey);
+  if (hr_scene_add_polygon(s, q, 4, grey, r) != HR_OK) *r = HR_POLY_DEGENERATE;
+  return s;
+}
+
 static void deep_B(hr_vec3 c, double B[3]) {
   B[0] = 1 + c.x / 1024;
   B[1] = 2 - c.y / 1024;
@@ -406,14 +417,9 @@ static void deep_B(hr_vec3 c, double B[3]) {
 }
 
 static void test_deep(void) {
-  hr_scene *s;
-  hr_scene_create("deep", &s);
-  double rho[3] = {0.5, 0.5, 0.5}, zero[3] = {0, 0, 0};
-  int grey;
-  hr_scene_add_material(s, "grey", rho, zero, &grey);
   hr_poly_result r;
-  hr_vec3 q[4] = {{0, 0, 0}, {1024, 0, 0}, {1024, 1024, 0}, {0, 1024, 0}};
-  hr_scene_add_polygon(s, q, 4, grey, &r);
+  const hr_vec3 q[4] = {{0, 0, 0}, {1024, 0, 0}, {1024, 1024, 0}, {0, 1024, 0}};
+  hr_scene *s = grey_quad("deep", q, &r);
   leafvec lv = {0};
   gen_quad(s, &lv, 0, 0, 0, HR_LATTICE, 0, refine_deep, deep_B);
   uint32_t smin = HR_LATTICE;
@@ -601,14 +607,9 @@ static double pixel_world_x(int col, int w, int h, double fov) {
 }
 
 static void test_render(const char *dir) {
-  hr_scene *s;
-  hr_scene_create("quad", &s);
-  double rho[3] = {0.5, 0.5, 0.5}, zero[3] = {0, 0, 0};
-  int grey;
-  hr_scene_add_material(s, "grey", rho, zero, &grey);
   hr_poly_result r;
-  hr_vec3 q[4] = {{-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}};
-  hr_scene_add_polygon(s, q, 4, grey, &r);
+  const hr_vec3 q[4] = {{-1, -1, 0}, {1, -1, 0}, {1, 1, 0}, {-1, 1, 0}};
+  hr_scene *s = grey_quad("quad", q, &r);
   const int w = 160, h = 120;
   hr_camera cam = {{0, 0, 5}, {0, 0, 0}, {0, 1, 0}, 40};
   float *rgb = malloc((size_t)w * h * 3 * sizeof *rgb);
@@ -1108,14 +1109,10 @@ static void test_split(void) {
  * has a mean radiosity of half its open part's, and its vertices beside the board must show the
  * open part's, as the lit neighbour does (not the mean: a dark smudge next to the board). */
 static void test_open(void) {
-  hr_scene *s;
-  hr_scene_create("open", &s);
-  double rho[3] = {0.5, 0.5, 0.5}, zero[3] = {0, 0, 0};
-  int grey;
-  hr_scene_add_material(s, "grey", rho, zero, &grey);
   hr_poly_result r;
-  hr_vec3 quad[4] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
-  CHECK(hr_scene_add_polygon(s, quad, 4, grey, &r) == HR_OK && r == HR_POLY_ADDED, "open add");
+  const hr_vec3 quad[4] = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+  hr_scene *s = grey_quad("open", quad, &r);
+  CHECK(r == HR_POLY_ADDED, "open add");
   const uint32_t L = HR_LATTICE, H = HR_LATTICE / 2;
   hr_leaf lv[2] = {{.surf = 0, .nverts = 4, .lat = {{0, 0}, {H, 0}, {H, L}, {0, L}},
                     .p = {{0, 0, 0}, {0.5, 0, 0}, {0.5, 1, 0}, {0, 1, 0}}, .area = 0.5,
