@@ -5,13 +5,16 @@
  *
  * For P = 2, 4, 8, 16, 32, 64 parts: random (a rank per element from its gid, the solver's
  * --balance random), greedy by work alone, ORB of the element centres weighted by work, METIS
- * k-way, the paper's clustering + simulated annealing from ORB's partition, and (with
- * LONG_EFFORT > 0) a long, cautious annealing with every proposal budget times LONG_EFFORT.
+ * k-way, the paper's clustering + simulated annealing of the whole graph from ORB's partition,
+ * (with LONG_EFFORT > 0) a long, cautious annealing with every proposal budget times
+ * LONG_EFFORT, and dist-anneal, what the solver's --balance anneal does (dist_anneal below).
  * Prints Z (eq. (5) with ALPHA, default 0.5), the cut, the imbalance (max W / mean W), the
  * partitioning time, and the modelled time of one iteration on a current cluster:
  * max over parts of (W_p t_w + C_p t_c), t_w = 10 ns per unit of work (a link gathered and
  * tested; museum and room runs: 5-6 ns to gather, about as much to test), t_c = 18.4 ns per unit
- * of communication (a 184-byte store at 10 GB/s). */
+ * of communication (a 184-byte store at 10 GB/s), and "P-rank ms": the time on P ranks, the
+ * partitioning time except for dist-anneal, whose clustering and contraction each rank does
+ * for its own elements (1/P of the measured time) before every rank anneals. */
 #include "hrad.h"
 #include "partition/partition.h"
 
@@ -31,7 +34,7 @@ typedef struct graph {
   int64_t *xadj;
   int32_t *adj;
   double *w, *c, *xyz;
-  uint64_t *gid;
+  uint64_t *gid, *pgid;
 } graph;
 
 static int load(const char *path, graph *G) {
@@ -43,12 +46,13 @@ static int load(const char *path, graph *G) {
   G->w = malloc((size_t)(n + 1) * sizeof *G->w);
   G->xyz = malloc((size_t)(3 * n + 1) * sizeof *G->xyz);
   G->gid = malloc((size_t)(n + 1) * sizeof *G->gid);
+  G->pgid = malloc((size_t)(n + 1) * sizeof *G->pgid);
   for (int i = 0; i < n; i++) {
     unsigned long long g, p;
     if (fscanf(f, "%llx %llx %lf %lf %lf %lf", &g, &p, &G->w[i], &G->xyz[3 * i],
                &G->xyz[3 * i + 1], &G->xyz[3 * i + 2]) != 6)
       return fclose(f), 0;
-    G->gid[i] = g;
+    G->gid[i] = g, G->pgid[i] = p;
   }
   if (fscanf(f, " edges %lld", &ne) != 1 || ne < 0) return fclose(f), 0;
   int32_t *u = malloc((size_t)(ne + 1) * sizeof *u), *v = malloc((size_t)(ne + 1) * sizeof *v);
@@ -91,6 +95,94 @@ static double model(const hr_graph *g, const int32_t *part, int P) {
   return t;
 }
 
+/* The index of gid in G (gids are written in increasing order), -1 if absent. */
+static int32_t index_of(const graph *G, uint64_t gid) {
+  int32_t lo = 0, hi = G->g.n;
+  while (lo < hi) {
+    const int32_t m = lo + (hi - lo) / 2;
+    if (G->gid[m] < gid) lo = m + 1;
+    else hi = m;
+  }
+  return lo < G->g.n && G->gid[lo] == gid ? lo : -1;
+}
+
+/* The start of a run's first balancing: whole surfaces (an element's tree with its root), here
+ * by the work of the tree, largest first, each to the least loaded part. */
+static void whole_surfaces(const graph *G, int P, int32_t *part) {
+  const int n = G->g.n;
+  int32_t *root = malloc((size_t)(n + 1) * sizeof *root);
+  double *tw = calloc((size_t)n + 1, sizeof *tw);
+  int32_t *rpart = malloc((size_t)(n + 1) * sizeof *rpart);
+  for (int v = 0; v < n; v++) { /* parents have smaller gids? not assumed: follow the chain */
+    int32_t r = v, p;
+    while (G->pgid[r] && (p = index_of(G, G->pgid[r])) >= 0) r = p;
+    root[v] = r;
+    tw[r] += G->g.w[v];
+  }
+  hr_partition_greedy(tw, n, P, rpart); /* non-roots weigh 0 here and go anywhere */
+  for (int v = 0; v < n; v++) part[v] = rpart[root[v]];
+  free(root), free(tw), free(rpart);
+}
+
+/* The tree edges of G (parent and child, weight 2) as a graph of their own: the solver's
+ * clustering follows them only. The arrays are malloc'd into t (free xadj, adj, c). */
+static void tree_graph(const graph *G, hr_graph *t) {
+  const int n = G->g.n;
+  int64_t *xadj = calloc((size_t)n + 1, sizeof *xadj), *at = malloc((size_t)(n + 1) * sizeof *at);
+  int32_t *adj = malloc((size_t)(2 * n + 1) * sizeof *adj);
+  int32_t *par = malloc((size_t)(n + 1) * sizeof *par);
+  double *c = malloc((size_t)(2 * n + 1) * sizeof *c);
+  for (int v = 0; v < n; v++) {
+    par[v] = G->pgid[v] ? index_of(G, G->pgid[v]) : -1;
+    if (par[v] >= 0) xadj[v + 1]++, xadj[par[v] + 1]++;
+  }
+  for (int v = 0; v < n; v++) xadj[v + 1] += xadj[v];
+  memcpy(at, xadj, (size_t)(n + 1) * sizeof *at);
+  for (int v = 0; v < n; v++)
+    if (par[v] >= 0) {
+      adj[at[v]] = par[v], c[at[v]++] = 2;
+      adj[at[par[v]]] = v, c[at[par[v]]++] = 2;
+    }
+  free(at), free(par);
+  *t = (hr_graph){n, xadj, adj, G->g.w, c};
+}
+
+/* The solver's --balance anneal (src/balance.c), here on one core: each part of the start (a
+ * rank's elements) is clustered along its own tree edges, the graph of the clusters is annealed
+ * from the start, the result projected. '*local' gets the time of the clustering and the
+ * contraction, which each rank does for its own part (1/P of it each, in the model); '*chain'
+ * that of the annealing (every rank runs a chain at once). */
+static int dist_anneal(const graph *G, int P, double alpha, int32_t *part, double *local,
+                       double *chain) {
+  const hr_graph *g = &G->g;
+  whole_surfaces(G, P, part); /* the start is given in a run: not timed */
+  const double t1 = now();
+  int32_t *cl = malloc((size_t)(g->n + 1) * sizeof *cl);
+  double total = 0;
+  for (int v = 0; v < g->n; v++) total += g->w[v];
+  int per = HR_PARTITION_CLUSTERS / P;
+  per = per > HR_PARTITION_CLUSTERS_MIN ? per : HR_PARTITION_CLUSTERS_MIN;
+  hr_graph t;
+  tree_graph(G, &t);
+  const int nc = hr_partition_cluster(&t, part, total / ((double)P * per), g->n, cl);
+  free((void *)t.xadj), free((void *)t.adj), free((void *)t.c);
+  int64_t *xadj;
+  int32_t *adj, *cpart = malloc((size_t)(nc + 1) * sizeof *cpart);
+  double *w, *c;
+  int ok = nc >= 0 && hr_partition_contract(g, cl, nc, &xadj, &adj, &w, &c);
+  const double t2 = now();
+  if (ok) {
+    for (int v = 0; v < g->n; v++) cpart[cl[v]] = part[v];
+    const hr_graph cg = {nc, xadj, adj, w, c};
+    ok = hr_partition_anneal(&cg, P, alpha, 1, cpart);
+    for (int v = 0; ok && v < g->n; v++) part[v] = cpart[cl[v]];
+    free(xadj), free(adj), free(w), free(c);
+  }
+  *local = t2 - t1, *chain = now() - t2;
+  free(cl), free(cpart);
+  return ok;
+}
+
 static uint64_t mix(uint64_t z) {
   z = (z ^ (z >> 30)) * UINT64_C(0xbf58476d1ce4e5b9);
   z = (z ^ (z >> 27)) * UINT64_C(0x94d049bb133111eb);
@@ -106,31 +198,36 @@ int main(int argc, char **argv) {
   const hr_graph *g = &G.g;
   printf("graph %s: %d nodes, %lld edge entries, alpha %g\n", argv[1], g->n,
          (long long)g->xadj[g->n], alpha);
-  printf("   P  method         Z          cut  imbalance   time ms  model us/iter\n");
+  printf("   P  method         Z          cut  imbalance   time ms  model us/iter  P-rank ms\n");
   int32_t *part = malloc((size_t)(g->n + 1) * sizeof *part);
-  static const char *const names[] = {"random", "greedy", "orb", "metis", "anneal", "anneal-long"};
+  static const char *const names[] = {"random", "greedy", "orb",        "metis",
+                                      "anneal", "anneal-long", "dist-anneal"};
   for (int P = 2; P <= 64; P *= 2)
-    for (int m = 0; m < 6; m++) {
+    for (int m = 0; m < 7; m++) {
       if (m == 5 && !(effort > 0)) continue;
       const double t0 = now();
       int ok = 1;
-      if (m == 0)
+      double local = 0, chain = 0;
+      if (m == 6) ok = dist_anneal(&G, P, alpha, part, &local, &chain);
+      else if (m == 0)
         for (int v = 0; v < g->n; v++)
           part[v] = (int32_t)(mix(1 ^ (G.gid[v] * UINT64_C(0x9e3779b97f4a7c15))) % (uint64_t)P);
       else if (m == 1) ok = hr_partition_greedy(g->w, g->n, P, part);
       else if (m == 2) ok = hr_partition_orb(G.xyz, g->w, g->n, P, part);
       else if (m == 3) ok = hr_partition_metis(g, P, part);
-      else {
+      else if (m < 6) {
         ok = hr_partition_orb(G.xyz, g->w, g->n, P, part) &&
              hr_partition_anneal_effort(g, P, alpha, 1, m == 5 ? effort : 1.0, part);
       }
       const double dt = now() - t0;
       double cut = 0, imb = 0;
       const double z = ok ? hr_partition_cost(g, part, P, alpha, &cut, &imb) : -1;
-      printf("%4d  %-11s %10.0f %12.0f %10.3f %9.1f %14.1f\n", P, names[m], z, cut, imb,
-             1e3 * dt, ok ? 1e6 * model(g, part, P) : -1);
+      /* on P ranks: the distributed method's local work is split over them */
+      const double ranks_ms = 1e3 * (m == 6 ? local / P + chain : dt);
+      printf("%4d  %-11s %10.0f %12.0f %10.3f %9.1f %14.1f %10.1f\n", P, names[m], z, cut, imb,
+             1e3 * dt, ok ? 1e6 * model(g, part, P) : -1, ranks_ms);
     }
   free(part);
-  free(G.xadj), free(G.adj), free(G.w), free(G.c), free(G.xyz), free(G.gid);
+  free(G.xadj), free(G.adj), free(G.w), free(G.c), free(G.xyz), free(G.gid), free(G.pgid);
   return 0;
 }

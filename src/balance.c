@@ -48,6 +48,17 @@ typedef struct edge_rec {
   uint64_t a, b;
 } edge_rec;
 
+/* What rank 0 receives for --balance anneal (plan_clustered): a cluster's work, and an
+ * element's cluster (or, in the subtree map, its rank). */
+typedef struct work_rec {
+  int64_t id;
+  double w;
+} work_rec;
+typedef struct gid_cluster {
+  uint64_t gid;
+  int64_t id;
+} gid_cluster;
+
 /* The gathered graph on rank 0 (and, for annealing, on every rank). */
 typedef struct bgraph {
   int32_t n;
@@ -169,10 +180,33 @@ static int count_sort(const half_edge *e, int64_t m, int32_t n, int by, half_edg
   return 1;
 }
 
+/* g's CSR arrays (g->n nodes) from the half-edges e (m, both directions of each edge; tmp
+ * as large, scratch): each row's neighbours in index order with repeated pairs summed. Two
+ * counting sorts (by neighbour, then stably by node): O(n + m). 0 when out of memory. */
+static int csr_build(bgraph *g, half_edge *e, half_edge *tmp, int64_t m) {
+  if (!count_sort(e, m, g->n, 1, tmp) || !count_sort(tmp, m, g->n, 0, e)) return 0;
+  g->xadj = calloc((size_t)g->n + 1, sizeof *g->xadj);
+  g->adj = malloc((size_t)(m + 1) * sizeof *g->adj);
+  g->c = malloc((size_t)(m + 1) * sizeof *g->c);
+  if (!g->xadj || !g->adj || !g->c) return 0;
+  int64_t u = 0;
+  for (int64_t k = 0; k < m; k++) {
+    if (k > 0 && e[k].a == e[k - 1].a && e[k].b == e[k - 1].b) {
+      g->c[u - 1] += e[k].c; /* the same pair again: add */
+      continue;
+    }
+    g->adj[u] = e[k].b;
+    g->c[u] = e[k].c;
+    g->xadj[e[k].a + 1]++;
+    u++;
+  }
+  for (int32_t i = 0; i < g->n; i++) g->xadj[i + 1] += g->xadj[i];
+  return 1;
+}
+
 /* Builds the CSR graph on rank 0 from the gathered nodes and link edges (both consumed): nodes
- * in gid order, each row's neighbours in index order with repeated pairs summed. O(nodes log
- * nodes + edges): two counting sorts (by neighbour, then stably by node) instead of a
- * comparison sort of the edges, which took about 2 s a balancing on museum's 4 M links. */
+ * in gid order. O(nodes log nodes + edges): a comparison sort of the edges took about 2 s a
+ * balancing on museum's 4 M links. */
 static int build_graph(bgraph *g, node_rec *nodes, int64_t nn, edge_rec *ed, int64_t ne) {
   nn = merge_nodes(nodes, nn);
   g->n = (int32_t)nn;
@@ -204,29 +238,31 @@ static int build_graph(bgraph *g, node_rec *nodes, int64_t nn, edge_rec *ed, int
     e[m++] = (half_edge){p, i, 2.0};
   }
   free(map.key), free(map.val);
-  ok = ok && count_sort(e, m, g->n, 1, tmp) && count_sort(tmp, m, g->n, 0, e);
-  free(tmp);
-  g->xadj = calloc((size_t)g->n + 1, sizeof *g->xadj);
-  g->adj = malloc((size_t)(m + 1) * sizeof *g->adj);
-  g->c = malloc((size_t)(m + 1) * sizeof *g->c);
-  if (!ok || !g->xadj || !g->adj || !g->c) {
-    free(e);
-    return 0;
-  }
-  int64_t u = 0;
-  for (int64_t k = 0; k < m; k++) {
-    if (k > 0 && e[k].a == e[k - 1].a && e[k].b == e[k - 1].b) {
-      g->c[u - 1] += e[k].c; /* the same pair again: add */
-      continue;
-    }
-    g->adj[u] = e[k].b;
-    g->c[u] = e[k].c;
-    g->xadj[e[k].a + 1]++;
-    u++;
-  }
-  for (int32_t i = 0; i < g->n; i++) g->xadj[i + 1] += g->xadj[i];
-  free(e);
-  return 1;
+  ok = ok && csr_build(g, e, tmp, m);
+  free(e), free(tmp);
+  return ok;
+}
+
+/* The links each element receives here (element links and, gathered like them, cluster
+ * links), by element index: malloc'd, NULL when out of memory. */
+static int64_t *recv_counts(const hr_solver *s) {
+  int64_t *recv = calloc((size_t)s->nel + 1, sizeof *recv);
+  if (!recv) return NULL;
+  for (int64_t k = 0; k < s->nlinks; k++)
+    if (s->links[k].Fu >= 0) recv[s->links[k].r]++;
+  hr_cluster_recv_counts(s, recv);
+  return recv;
+}
+
+/* The refinement work done here for element e's links, per iteration (see RAY_WORK). */
+static double ray_work(const hr_solver *s, int64_t e) {
+  return RAY_WORK * s->erays[e] / (s->iterations > 1 ? s->iterations : 1);
+}
+
+/* W of an element this rank owns (the file's header comment): without the ray work other
+ * ranks did for it. */
+static double own_work(const hr_solver *s, int64_t e, const int64_t *recv) {
+  return (double)recv[e] + 1.0 + ray_work(s, e);
 }
 
 /* Gathers the graph on rank 0 ('g' filled there; zeroed elsewhere). A collective. */
@@ -237,21 +273,16 @@ static hr_status gather_graph(hr_solver *s, bgraph *g, hr_err *err) {
   for (int64_t k = 0; k < s->nlinks; k++) nl += s->links[k].Fu >= 0;
   node_rec *nodes = malloc((size_t)(nrec + 1) * sizeof *nodes);
   edge_rec *ed = malloc((size_t)(nl + 1) * sizeof *ed);
-  int64_t *recv = calloc((size_t)s->nel + 1, sizeof *recv);
+  int64_t *recv = recv_counts(s);
   if (!nodes || !ed || !recv) hr_dist_abort(s->dist, 1); /* every rank must take part */
-  for (int64_t k = 0; k < s->nlinks; k++)
-    if (s->links[k].Fu >= 0) recv[s->links[k].r]++;
-  hr_cluster_recv_counts(s, recv); /* gathered like element links */
   int64_t i = 0;
-  const int iters = s->iterations > 1 ? s->iterations : 1;
   for (int64_t e = 0; e < s->nel; e++) {
-    const double rw = RAY_WORK * s->erays[e] / iters;
     if (!hr_owns(s, e)) {
-      if (s->erays[e] > 0) nodes[i++] = (node_rec){s->el[e].gid, EXTRA, rw, {0, 0, 0}};
+      if (s->erays[e] > 0) nodes[i++] = (node_rec){s->el[e].gid, EXTRA, ray_work(s, e), {0}};
       continue;
     }
     const int32_t p = s->el[e].parent;
-    nodes[i++] = (node_rec){s->el[e].gid, p >= 0 ? s->el[p].gid : 0, (double)recv[e] + 1.0 + rw,
+    nodes[i++] = (node_rec){s->el[e].gid, p >= 0 ? s->el[p].gid : 0, own_work(s, e, recv),
                             {s->el[e].c.x, s->el[e].c.y, s->el[e].c.z}};
   }
   i = 0;
@@ -308,21 +339,12 @@ static void share_graph(hr_solver *s, bgraph *g) {
   hr_dist_bcast(s->dist, g->c, (size_t)hdr[1] * sizeof *g->c);
 }
 
-/* The partition of 'method' for P parts into part[] (rank 0's graph; for annealing every
- * rank's). 0 when out of memory. */
-static int partition(hr_solver *s, const bgraph *g, int method, int P, int32_t *part) {
+/* The partition of 'method' (METIS or ORB) for P parts into part[] (rank 0's graph). 0 when
+ * out of memory. */
+static int partition(const bgraph *g, int method, int P, int32_t *part) {
   const hr_graph v = view(g);
-  switch (method) {
-  case HR_BALANCE_METIS:
-    return hr_partition_metis(&v, P, part);
-  case HR_BALANCE_ORB:
-    return hr_partition_orb(g->xyz, g->w, g->n, P, part);
-  default: /* annealing from ORB's partition */
-    if (!hr_partition_orb(g->xyz, g->w, g->n, P, part)) return 0;
-    return hr_partition_anneal(&v, P, s->bal_alpha, s->opt.seed * 1000003 + (uint64_t)s->rank +
-                                                        (uint64_t)s->nbalance * 7919,
-                               part);
-  }
+  return method == HR_BALANCE_METIS ? hr_partition_metis(&v, P, part)
+                                    : hr_partition_orb(g->xyz, g->w, g->n, P, part);
 }
 
 /* The subtree map of a partition: roots always, other elements where their part differs from
@@ -337,75 +359,309 @@ static int64_t subtree_map(const bgraph *g, const int32_t *part, uint64_t *gids,
   return m;
 }
 
-hr_status hr_solver_balance(hr_solver *s, int method, hr_err *err) {
-  if (!s->dist || method == HR_BALANCE_NONE) return HR_OK;
-  const double t0 = hr_now();
+/* Every rank gets rank 0's subtree map ('*m' entries of '*gids' and '*ranks'). A collective. */
+static hr_status share_map(hr_solver *s, int64_t *m, uint64_t **gids, int32_t **ranks) {
+  hr_dist_bcast(s->dist, m, sizeof *m);
+  if (s->rank != 0) {
+    *gids = malloc((size_t)(*m + 1) * sizeof **gids);
+    *ranks = malloc((size_t)(*m + 1) * sizeof **ranks);
+    if (!*gids || !*ranks) hr_dist_abort(s->dist, 1);
+  }
+  hr_dist_bcast(s->dist, *gids, (size_t)*m * sizeof **gids);
+  hr_dist_bcast(s->dist, *ranks, (size_t)*m * sizeof **ranks);
+  return HR_OK;
+}
+
+/* The subtree map of a partition of the clusters: each rank lists its own elements that are
+ * roots or go to another rank than their parent (whose cluster it knows), rank 0 collects
+ * them and every rank gets the map. A collective. */
+static hr_status cluster_map(hr_solver *s, const int32_t *ecl, const int32_t *part, int64_t *m,
+                             uint64_t **gids, int32_t **ranks) {
+  gid_cluster *mine = malloc((size_t)(s->nel + 1) * sizeof *mine);
+  if (!mine) hr_dist_abort(s->dist, 1);
+  int64_t n = 0;
+  for (int64_t i = 0; i < s->nel; i++) {
+    if (!hr_owns(s, i) || ecl[i] < 0) continue;
+    const int32_t p = s->el[i].parent, r = part[ecl[i]];
+    if (p >= 0 && ecl[p] >= 0 && part[ecl[p]] == r) continue;
+    mine[n++] = (gid_cluster){s->el[i].gid, r};
+  }
+  void *all = NULL;
+  int64_t nall = 0;
+  hr_status st = to_rank0(s, mine, n, sizeof *mine, &all, &nall);
+  free(mine);
+  if (st != HR_OK) return st;
+  *m = nall;
+  if (s->rank == 0) {
+    *gids = malloc((size_t)(nall + 1) * sizeof **gids);
+    *ranks = malloc((size_t)(nall + 1) * sizeof **ranks);
+    if (!*gids || !*ranks) hr_dist_abort(s->dist, 1);
+    const gid_cluster *got = all;
+    for (int64_t j = 0; j < nall; j++) (*gids)[j] = got[j].gid, (*ranks)[j] = (int32_t)got[j].id;
+  }
+  free(all);
+  return share_map(s, m, gids, ranks);
+}
+
+/* Is the partition with Z z_new worth moving to from z_now? Rank 0 decides (the timings the
+ * second gate reads are rank 0's) and every rank gets the answer. A collective. */
+static int take_partition(hr_solver *s, double z_now, double z_new) {
+  int take = s->rank == 0 && z_new < KEEP_GAIN * z_now && worth_moving(s, z_now, z_new);
+  hr_dist_bcast(s->dist, &take, sizeof take);
+  return take;
+}
+
+/* METIS or ORB on the whole graph, gathered on rank 0: '*m' gets the subtree map's length (on
+ * every rank, with its gids and ranks), or -1 when the partition is not worth moving to. */
+static hr_status plan_gathered(hr_solver *s, int method, int64_t *m, uint64_t **gids,
+                               int32_t **ranks, hr_err *err) {
   bgraph g;
   hr_status st = gather_graph(s, &g, err);
   if (st != HR_OK) return st;
   const int P = s->nranks;
-  if (method == HR_BALANCE_ANNEAL) share_graph(s, &g);
-  int32_t *part = NULL;
-  int ok = 1;
-  if (s->rank == 0 || method == HR_BALANCE_ANNEAL) {
+  double z_now = 0, z_new = 0;
+  int32_t *part = NULL, *now = NULL;
+  if (s->rank == 0) {
     part = malloc((size_t)(g.n + 1) * sizeof *part);
-    ok = part && partition(s, &g, method, P, part);
-  }
-  if (!hr_dist_any(s->dist, !ok)) {
-    if (method == HR_BALANCE_ANNEAL) { /* the chain with the lowest Z wins (ties: lowest rank) */
-      const hr_graph v = view(&g);
-      const double z = hr_partition_cost(&v, part, P, s->bal_alpha, NULL, NULL);
-      const int win = hr_dist_argmin(s->dist, z);
-      hr_dist_bcast_from(s->dist, win, part, (size_t)g.n * sizeof *part);
-    }
-  } else {
-    st = hr_err_set(err, HR_ERR_NOMEM, "out of memory (balancing)");
-  }
-  /* rank 0 makes the subtree map; every rank gets it and migrates */
-  int64_t m = 0;
-  uint64_t *gids = NULL;
-  int32_t *ranks = NULL;
-  if (st == HR_OK && s->rank == 0) {
-    gids = malloc((size_t)(g.n + 1) * sizeof *gids);
-    ranks = malloc((size_t)(g.n + 1) * sizeof *ranks);
-    int32_t *now = malloc((size_t)(g.n + 1) * sizeof *now);
-    if (!gids || !ranks || !now) hr_dist_abort(s->dist, 1);
-    /* a partition that does not lower Z by KEEP_GAIN is not worth moving the graph */
+    now = malloc((size_t)(g.n + 1) * sizeof *now);
+    if (!part || !now || !partition(&g, method, P, part)) hr_dist_abort(s->dist, 1);
     for (int32_t i = 0; i < g.n; i++) now[i] = hr_owner_of(s, g.gid[i]);
     const hr_graph v = view(&g);
+    z_now = hr_partition_cost(&v, now, P, s->bal_alpha, NULL, NULL);
+    z_new = hr_partition_cost(&v, part, P, s->bal_alpha, NULL, NULL);
+  }
+  *m = -1;
+  if (take_partition(s, z_now, z_new)) {
+    if (s->rank == 0) {
+      *gids = malloc((size_t)(g.n + 1) * sizeof **gids);
+      *ranks = malloc((size_t)(g.n + 1) * sizeof **ranks);
+      if (!*gids || !*ranks) hr_dist_abort(s->dist, 1);
+      *m = subtree_map(&g, part, *gids, *ranks);
+    }
+    st = share_map(s, m, gids, ranks);
+  }
+  free(part), free(now);
+  bgraph_free(&g);
+  return st;
+}
+
+/* ---- the paper's clustering, where the elements are (--balance anneal) -------------------- */
+
+/* Clusters this rank's own elements (hr_partition_cluster) along the tree edges between them,
+ * up to 'bound' of work each: ecl[e] gets the cluster (from 0) of each element it owns, -1 for
+ * the others. Returns the count, -1 when out of memory. Along the tree only, not the links:
+ * the clusters are pieces of surfaces (subtrees, spatially compact), the pass is O(elements),
+ * and measured on museum's final graph the partitions came out as good or better than with
+ * the links (BENCHMARKS.md, "Graph balancing, third pass"), whose pass took 0.4-0.9 s a
+ * balancing at 2 ranks. */
+static int32_t cluster_own(const hr_solver *s, const int64_t *recv, double bound, int32_t *ecl) {
+  int32_t *lix = malloc((size_t)(s->nel + 1) * sizeof *lix); /* element -> local node */
+  int64_t *elem = malloc((size_t)(s->nel + 1) * sizeof *elem); /* local node -> element */
+  half_edge *e = malloc((size_t)(2 * s->nel + 1) * sizeof *e);
+  half_edge *tmp = malloc((size_t)(2 * s->nel + 1) * sizeof *tmp);
+  bgraph lg = {0};
+  int32_t *lcl = NULL, nc = -1;
+  if (lix && elem && e && tmp) {
+    for (int64_t i = 0; i < s->nel; i++) lix[i] = hr_owns(s, i) ? (elem[lg.n] = i, lg.n++) : -1;
+    lg.w = malloc((size_t)(lg.n + 1) * sizeof *lg.w);
+    lcl = malloc((size_t)(lg.n + 1) * sizeof *lcl);
+    int64_t m = 0;
+    for (int32_t i = 0; lg.w && i < lg.n; i++) {
+      const int32_t p = s->el[elem[i]].parent, b = p >= 0 ? lix[p] : -1;
+      lg.w[i] = own_work(s, elem[i], recv);
+      if (b < 0) continue;
+      e[m++] = (half_edge){i, b, 2.0};
+      e[m++] = (half_edge){b, i, 2.0};
+    }
+    if (lg.w && lcl && csr_build(&lg, e, tmp, m)) {
+      const hr_graph v = view(&lg);
+      nc = hr_partition_cluster(&v, NULL, bound, lg.n > 0 ? lg.n : 1, lcl);
+    }
+    for (int64_t i = 0; nc >= 0 && i < s->nel; i++) ecl[i] = lix[i] >= 0 ? lcl[lix[i]] : -1;
+  }
+  free(lix), free(elem), free(e), free(tmp), free(lcl);
+  bgraph_free(&lg);
+  return nc;
+}
+
+/* Every rank learns the cluster of every element it holds but does not own (ecl[e] < 0 on
+ * entry): each rank's (gid, cluster) pairs go to all. A collective. */
+static hr_status share_clusters(hr_solver *s, int32_t *ecl) {
+  int64_t n = 0;
+  for (int64_t i = 0; i < s->nel; i++) n += ecl[i] >= 0;
+  gid_cluster *mine = malloc((size_t)(n + 1) * sizeof *mine);
+  if (!mine) hr_dist_abort(s->dist, 1);
+  n = 0;
+  for (int64_t i = 0; i < s->nel; i++)
+    if (ecl[i] >= 0) mine[n++] = (gid_cluster){s->el[i].gid, ecl[i]};
+  void *all = NULL;
+  int64_t nall = 0;
+  hr_status st = to_rank0(s, mine, n, sizeof *mine, &all, &nall);
+  free(mine);
+  if (st != HR_OK) return st;
+  hr_dist_bcast(s->dist, &nall, sizeof nall);
+  gid_cluster *pairs = s->rank == 0 ? all : malloc((size_t)(nall + 1) * sizeof *pairs);
+  uint64_t *gid = malloc((size_t)(nall + 1) * sizeof *gid);
+  if (!pairs || !gid) hr_dist_abort(s->dist, 1);
+  hr_dist_bcast(s->dist, pairs, (size_t)nall * sizeof *pairs);
+  for (int64_t j = 0; j < nall; j++) gid[j] = pairs[j].gid;
+  gid_map map = {0};
+  if (!gid_map_build(&map, gid, (int32_t)nall)) hr_dist_abort(s->dist, 1);
+  for (int64_t i = 0; i < s->nel; i++) {
+    if (ecl[i] >= 0) continue;
+    const int32_t j = gid_map_get(&map, s->el[i].gid);
+    ecl[i] = j >= 0 ? (int32_t)pairs[j].id : -1;
+  }
+  free(map.key), free(map.val), free(gid), free(pairs);
+  return HR_OK;
+}
+
+/* The graph of the clusters, assembled on rank 0 from what each rank folds of its own links,
+ * tree edges and work (cluster pairs and sums: the graph's edge and node weights as
+ * gather_graph's, summed over the clusters) and given to every rank. A collective. */
+static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, int32_t K, const int64_t *recv,
+                               bgraph *g) {
+  const int64_t cap = 2 * (s->nlinks + s->nel) + 1;
+  half_edge *e = malloc((size_t)cap * sizeof *e), *tmp = malloc((size_t)cap * sizeof *tmp);
+  double *w = calloc((size_t)K + 1, sizeof *w);
+  if (!e || !tmp || !w) hr_dist_abort(s->dist, 1);
+  int64_t m = 0;
+  for (int64_t k = 0; k < s->nlinks; k++) {
+    const int32_t a = ecl[s->links[k].r], b = ecl[s->links[k].s];
+    if (s->links[k].Fu >= 0 && a >= 0 && b >= 0 && a != b) e[m++] = (half_edge){a, b, 1.0};
+  }
+  for (int64_t i = 0; i < s->nel; i++) {
+    if (ecl[i] < 0) continue;
+    if (hr_owns(s, i)) {
+      w[ecl[i]] += own_work(s, i, recv);
+      const int32_t p = s->el[i].parent, b = p >= 0 ? ecl[p] : -1;
+      if (b >= 0 && b != ecl[i]) e[m++] = (half_edge){ecl[i], b, 2.0};
+    } else if (s->erays[i] > 0) {
+      w[ecl[i]] += ray_work(s, i);
+    }
+  }
+  /* one record per pair (a < b) and per cluster with work: O(links / P) folded to O(pairs) */
+  for (int64_t k = 0; k < m; k++)
+    if (e[k].a > e[k].b) e[k] = (half_edge){e[k].b, e[k].a, e[k].c};
+  bgraph lg = {.n = K};
+  if (!csr_build(&lg, e, tmp, m)) hr_dist_abort(s->dist, 1);
+  int64_t np = 0, nw = 0;
+  for (int32_t a = 0; a < K; a++) {
+    np += lg.xadj[a + 1] - lg.xadj[a];
+    nw += w[a] > 0;
+  }
+  work_rec *wr = malloc((size_t)(nw + 1) * sizeof *wr);
+  if (!wr) hr_dist_abort(s->dist, 1);
+  m = 0, nw = 0;
+  for (int32_t a = 0; a < K; a++) {
+    for (int64_t k = lg.xadj[a]; k < lg.xadj[a + 1]; k++)
+      e[m++] = (half_edge){a, lg.adj[k], lg.c[k]};
+    if (w[a] > 0) wr[nw++] = (work_rec){a, w[a]};
+  }
+  bgraph_free(&lg);
+  void *ae = NULL, *aw = NULL;
+  int64_t ne = 0, nwall = 0;
+  hr_status st = to_rank0(s, e, np, sizeof *e, &ae, &ne);
+  free(e), free(tmp);
+  if (st == HR_OK) st = to_rank0(s, wr, nw, sizeof *wr, &aw, &nwall);
+  free(wr);
+  memset(g, 0, sizeof *g);
+  if (st == HR_OK && s->rank == 0) {
+    g->n = K;
+    g->w = calloc((size_t)K + 1, sizeof *g->w);
+    g->xyz = calloc((size_t)(3 * K) + 1, sizeof *g->xyz);
+    half_edge *both = malloc((size_t)(2 * ne + 1) * sizeof *both);
+    tmp = malloc((size_t)(2 * ne + 1) * sizeof *tmp);
+    if (!g->w || !g->xyz || !both || !tmp) hr_dist_abort(s->dist, 1);
+    for (int64_t j = 0; j < nwall; j++) g->w[((work_rec *)aw)[j].id] += ((work_rec *)aw)[j].w;
+    const half_edge *pe = ae;
+    for (int64_t j = 0; j < ne; j++) {
+      both[2 * j] = pe[j];
+      both[2 * j + 1] = (half_edge){pe[j].b, pe[j].a, pe[j].c};
+    }
+    if (!csr_build(g, both, tmp, 2 * ne)) hr_dist_abort(s->dist, 1);
+    free(both), free(tmp);
+  }
+  free(ae), free(aw), free(w);
+  if (st == HR_OK) share_graph(s, g);
+  return st;
+}
+
+/* The paper's method, where the elements are: each rank clusters its own elements
+ * (HR_PARTITION_CLUSTERS over all ranks), the graph of the clusters (a few thousand nodes, its
+ * edges folded by each rank from its own links) goes to every rank, each anneals it from the
+ * current owners with its own seed, and the chain with the lowest Z wins (the paper's parallel
+ * annealing, its reference [1], one period). O(links / P) a rank instead of the whole graph
+ * on rank 0 (docs/design.md, "Balancing"). '*m' as plan_gathered's. */
+static hr_status plan_clustered(hr_solver *s, int64_t *m, uint64_t **gids, int32_t **ranks,
+                                hr_err *err) {
+  const int P = s->nranks;
+  int64_t *recv = recv_counts(s), *first = calloc((size_t)P + 1, sizeof *first);
+  int32_t *ecl = malloc((size_t)(s->nel + 1) * sizeof *ecl);
+  if (!recv || !first || !ecl) hr_dist_abort(s->dist, 1);
+  double total = 0;
+  for (int64_t i = 0; i < s->nel; i++)
+    total += hr_owns(s, i) ? own_work(s, i, recv) : s->erays[i] > 0 ? ray_work(s, i) : 0.0;
+  hr_dist_sum_f64(s->dist, &total, 1);
+  const int per = HR_PARTITION_CLUSTERS / P > HR_PARTITION_CLUSTERS_MIN
+                      ? HR_PARTITION_CLUSTERS / P
+                      : HR_PARTITION_CLUSTERS_MIN;
+  const int32_t nc = cluster_own(s, recv, total / ((double)P * per), ecl);
+  if (nc < 0) hr_dist_abort(s->dist, 1);
+  first[s->rank + 1] = nc; /* cluster ids: rank r's from first[r] */
+  hr_dist_sum_i64(s->dist, first + 1, P);
+  for (int r = 0; r < P; r++) first[r + 1] += first[r];
+  for (int64_t i = 0; i < s->nel; i++)
+    if (ecl[i] >= 0) ecl[i] += (int32_t)first[s->rank];
+  const int32_t K = (int32_t)first[P];
+  bgraph g;
+  hr_status st = share_clusters(s, ecl);
+  if (st == HR_OK) st = fold_clusters(s, ecl, K, recv, &g);
+  free(recv);
+  *m = -1;
+  if (st != HR_OK) {
+    free(first), free(ecl);
+    return hr_dist_agree(s, hr_err_set(err, st, "out of memory (balancing)"), err);
+  }
+  int32_t *now = malloc((size_t)(K + 1) * sizeof *now);
+  int32_t *part = malloc((size_t)(K + 1) * sizeof *part);
+  if (!now || !part) hr_dist_abort(s->dist, 1);
+  for (int r = 0; r < P; r++)
+    for (int64_t c = first[r]; c < first[r + 1]; c++) now[c] = part[c] = r;
+  const hr_graph v = view(&g);
+  const uint64_t seed =
+      s->opt.seed * 1000003 + (uint64_t)s->rank + (uint64_t)s->nbalance * 7919;
+  if (hr_dist_any(s->dist, !hr_partition_anneal(&v, P, s->bal_alpha, seed, part)))
+    st = hr_err_set(err, HR_ERR_NOMEM, "out of memory (balancing)");
+  if (st == HR_OK) { /* the chain with the lowest Z wins (ties: the lowest rank) */
+    const int win = hr_dist_argmin(s->dist, hr_partition_cost(&v, part, P, s->bal_alpha, NULL,
+                                                                NULL));
+    hr_dist_bcast_from(s->dist, win, part, (size_t)K * sizeof *part);
     const double z_now = hr_partition_cost(&v, now, P, s->bal_alpha, NULL, NULL);
     const double z_new = hr_partition_cost(&v, part, P, s->bal_alpha, NULL, NULL);
-    m = z_new < KEEP_GAIN * z_now && worth_moving(s, z_now, z_new)
-            ? subtree_map(&g, part, gids, ranks)
-            : -1;
-    free(now);
+    if (take_partition(s, z_now, z_new)) st = cluster_map(s, ecl, part, m, gids, ranks);
   }
-  free(part);
-  if (st == HR_OK) {
-    hr_dist_bcast(s->dist, &m, sizeof m);
-    if (m < 0) { /* kept */
-      free(gids), free(ranks);
-      bgraph_free(&g);
-      s->nbalance++;
-      s->t_bal_last = hr_now() - t0;
-      s->t.balance += s->t_bal_last;
-      return HR_OK;
-    }
-    if (s->rank != 0) {
-      gids = malloc((size_t)(m + 1) * sizeof *gids);
-      ranks = malloc((size_t)(m + 1) * sizeof *ranks);
-      if (!gids || !ranks) hr_dist_abort(s->dist, 1);
-    }
-    hr_dist_bcast(s->dist, gids, (size_t)m * sizeof *gids);
-    hr_dist_bcast(s->dist, ranks, (size_t)m * sizeof *ranks);
+  free(now), free(part), free(first), free(ecl);
+  bgraph_free(&g);
+  return st;
+}
+
+hr_status hr_solver_balance(hr_solver *s, int method, hr_err *err) {
+  if (!s->dist || method == HR_BALANCE_NONE) return HR_OK;
+  const double t0 = hr_now();
+  int64_t m = -1;
+  uint64_t *gids = NULL;
+  int32_t *ranks = NULL;
+  hr_status st = method == HR_BALANCE_ANNEAL ? plan_clustered(s, &m, &gids, &ranks, err)
+                                             : plan_gathered(s, method, &m, &gids, &ranks, err);
+  if (st == HR_OK && m >= 0) {
     const double tm = hr_now();
     st = hr_solver_migrate(s, gids, ranks, m, err);
     s->t_migrate = hr_now() - tm;
+    s->nmoved++;
   }
   free(gids), free(ranks);
-  bgraph_free(&g);
   s->nbalance++;
-  s->nmoved++;
   s->t_bal_last = hr_now() - t0;
   s->t.balance += s->t_bal_last;
   return st;

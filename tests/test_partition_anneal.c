@@ -2,11 +2,14 @@
  * clustering + simulated annealing partitioner (partition/anneal.c) on a 32x32 grid graph:
  * from width-1 stripes it must come near the quadrants' optimum, from the quadrants it must not
  * get worse, it repeats itself for a seed, and it rejects bad input; on a random graph with
- * planted groups it finds them. */
+ * planted groups it finds them. The clustering and contraction that distributed balancing uses
+ * (hr_partition_cluster, hr_partition_contract): clusters stay inside the given parts and under
+ * the bound, and Z of the contracted graph equals Z of the projected partition. */
 #include "partition/partition.h"
 #include "testutil.h"
 #include "xorshift.h"
 
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
@@ -241,11 +244,67 @@ static void test_planted(void) {
  * proposals (moves and swaps) on the grid with random weights, for several part counts. */
 static void test_incremental(test_graph *t) {
   static int32_t part[NODES];
-  for (int parts = 2; parts <= 16; parts *= 2) {
+  for (int parts = 2; parts <= 64; parts *= 4) {
     for (int v = 0; v < NODES; v++) part[v] = v % parts;
     const double d = hr_partition_anneal_drift(&t->g, parts, 0.3, 9, 200000, part);
     CHECK(d >= 0 && d < 1e-9, "%d parts: incremental Z off by %g (relative)", parts, d);
   }
+}
+
+/* Clusters of the grid inside slanted bands (which 16-node clusters grown in index order would
+ * cross), bound 16 nodes; then Z of random partitions of the clusters on the contracted graph
+ * against Z of their projections on the grid. */
+static void test_cluster_contract(test_graph *t) {
+  static int32_t quad[NODES], cl[NODES], part[NODES];
+  for (int v = 0; v < NODES; v++) quad[v] = (v % SIDE + 2 * (v / SIDE)) / 7 % 3;
+  const int nc = hr_partition_cluster(&t->g, quad, 16.0, NODES, cl);
+  CHECK(nc >= NODES / 16 && nc <= NODES, "cluster count %d", nc);
+  if (nc < 1 || nc > NODES) return;
+  static double weight[NODES];
+  static int32_t quad_of[NODES];
+  memset(weight, 0, sizeof weight);
+  for (int a = 0; a < nc; a++) quad_of[a] = -1;
+  int bad = 0;
+  for (int v = 0; v < NODES; v++) {
+    if (cl[v] < 0 || cl[v] >= nc) {
+      bad++;
+      continue;
+    }
+    weight[cl[v]] += t->w[v];
+    if (quad_of[cl[v]] >= 0 && quad_of[cl[v]] != quad[v]) bad++;
+    quad_of[cl[v]] = quad[v];
+  }
+  double wmax = 0;
+  for (int a = 0; a < nc; a++) wmax = weight[a] > wmax ? weight[a] : wmax;
+  CHECK(bad == 0, "%d nodes in a cluster across bands (or out of range)", bad);
+  CHECK(wmax <= 16.0 + 1e-9, "a cluster weighs %g, above the bound 16", wmax);
+  int64_t *xadj;
+  int32_t *adj;
+  double *w, *c;
+  CHECK(hr_partition_contract(&t->g, cl, nc, &xadj, &adj, &w, &c), "contraction failed");
+  const hr_graph cg = {nc, xadj, adj, w, c};
+  double wsum = 0, csum = 0, cut_grid = 0;
+  for (int a = 0; a < nc; a++) wsum += w[a];
+  for (int64_t k = 0; k < xadj[nc]; k++) csum += c[k];
+  for (int v = 0; v < NODES; v++)
+    for (int64_t k = t->xadj[v]; k < t->xadj[v + 1]; k++) cut_grid += cl[t->adj[k]] != cl[v];
+  CHECK(fabs(wsum - NODES) < 1e-9, "contracted weight %g, want %d", wsum, NODES);
+  CHECK(fabs(csum - cut_grid) < 1e-9, "contracted edges %g, want %g", csum, cut_grid);
+  static int32_t cpart[NODES];
+  for (int trial = 0; trial < 5; trial++) {
+    const int parts = 2 + trial * 3;
+    for (int a = 0; a < nc; a++) cpart[a] = rnd_int(parts);
+    for (int v = 0; v < NODES; v++) part[v] = cpart[cl[v]];
+    const double zc = hr_partition_cost(&cg, cpart, parts, 0.3, NULL, NULL);
+    const double zg = hr_partition_cost(&t->g, part, parts, 0.3, NULL, NULL);
+    CHECK(fabs(zc - zg) <= 1e-12 * zg, "%d parts: Z %g on the clusters, %g on the grid", parts,
+          zc, zg);
+  }
+  free(xadj), free(adj), free(w), free(c);
+  CHECK(hr_partition_cluster(&t->g, NULL, 16.0, 0, cl) == -1, "cap 0 accepted");
+  cl[5] = nc; /* out of range */
+  CHECK(!hr_partition_contract(&t->g, cl, nc, &xadj, &adj, &w, &c) && !xadj,
+        "a cluster id out of range accepted");
 }
 
 int main(void) {
@@ -258,5 +317,7 @@ int main(void) {
   test_bad_input(&t);
   test_never_worse(&t); /* it reweights the grid */
   test_incremental(&t);
+  make_grid(&t);
+  test_cluster_contract(&t);
   return t_done("test_partition_anneal");
 }

@@ -164,6 +164,39 @@ static void state_rank(anneal_state *st) {
   st->z = state_cost(st, st->top[0]);
 }
 
+/* Puts part p where it belongs among the three costliest, after its cost rose (or p was not
+ * among them): O(1), where state_rank is O(nparts). */
+static void state_rank_raise(anneal_state *st, int p) {
+  int k = 0;
+  while (k < 3 && st->top[k] != p) k++;
+  for (; k < 2; k++) st->top[k] = st->top[k + 1]; /* out (or the last slot, if absent) */
+  if (k == 2) st->top[2] = -1;
+  const double cp = state_cost(st, p);
+  int slot = 3;
+  while (slot > 0 && (st->top[slot - 1] < 0 || cp > state_cost(st, st->top[slot - 1]))) slot--;
+  if (slot == 3) return;
+  for (k = 2; k > slot; k--) st->top[k] = st->top[k - 1];
+  st->top[slot] = p;
+}
+
+/* Z and the sum after a move between parts a and b, whose costs were ca0 and cb0: when neither
+ * fell while among the three costliest, the others are as they were and the two only need
+ * placing (most accepted moves); otherwise a full state_rank, which also recomputes the sum. */
+static void state_rank_moved(anneal_state *st, int a, int b, double ca0, double cb0) {
+  const double ca = state_cost(st, a), cb = state_cost(st, b);
+  for (int k = 0; k < 3; k++) {
+    const int p = st->top[k];
+    if (p < 0 || (p == a && ca < ca0) || (p == b && cb < cb0)) {
+      state_rank(st);
+      return;
+    }
+  }
+  st->sum += (ca - ca0) + (cb - cb0);
+  state_rank_raise(st, a);
+  state_rank_raise(st, b);
+  st->z = state_cost(st, st->top[0]);
+}
+
 /* Is (z, sum) better than the best so far? The tolerance absorbs the drift of the incremental
  * loads, so that a re-visit of the best partition does not count as an improvement. */
 static int is_better(double z, double sum, double best_z, double best_sum) {
@@ -287,12 +320,13 @@ static void apply_raw(anneal_state *st, const move *m) {
       st->conn[(size_t)u * np + (size_t)m->to] += g->c[k];
     }
   }
+  const double cf0 = state_cost(st, m->from), ct0 = state_cost(st, m->to);
   st->part[m->v] = m->to;
   st->C[m->from] = m->c_from;
   st->C[m->to] = m->c_to;
   st->W[m->from] = m->w_from;
   st->W[m->to] = m->w_to;
-  state_rank(st);
+  state_rank_moved(st, m->from, m->to, cf0, ct0);
   if (!st->stale) {
     if (st->njournal < st->g->n) st->journal[st->njournal++] = m->v;
     else st->stale = 1;
@@ -524,11 +558,12 @@ static heap_entry frontier_pop(frontier *f) {
 }
 
 /* Grows cluster 'id' from node 'seed': repeatedly adds the unclustered node most strongly
- * connected to the cluster, until the cluster weighs 'bound' (when > 0) or has 'cap' nodes, or
- * no unclustered neighbour is left. 'conn' (n, zero on entry and exit) holds the connections.
- * Returns the weight it took. */
-static double grow_cluster(const hr_graph *g, int32_t seed, int32_t id, double bound,
-                           int64_t cap, int32_t *cluster, double *conn, frontier *f) {
+ * connected to the cluster (and, with 'within', of the seed's value there), until the cluster
+ * weighs 'bound' (when > 0) or has 'cap' nodes, or no unclustered neighbour is left. 'conn' (n,
+ * zero on entry and exit) holds the connections. Returns the weight it took. */
+static double grow_cluster(const hr_graph *g, const int32_t *within, int32_t seed, int32_t id,
+                           double bound, int64_t cap, int32_t *cluster, double *conn,
+                           frontier *f) {
   double weight = 0.0;
   int64_t size = 0;
   f->size = 0;
@@ -542,7 +577,7 @@ static double grow_cluster(const hr_graph *g, int32_t seed, int32_t id, double b
     size++;
     for (int64_t k = g->xadj[top.v]; k < g->xadj[top.v + 1]; k++) {
       const int32_t u = g->adj[k];
-      if (cluster[u] >= 0) continue;
+      if (cluster[u] >= 0 || (within && within[u] != within[seed])) continue;
       conn[u] += g->c[k];
       frontier_push(f, u, conn[u]);
     }
@@ -552,28 +587,34 @@ static double grow_cluster(const hr_graph *g, int32_t seed, int32_t id, double b
   return weight;
 }
 
-/* Assigns every node a cluster (in index order of their first nodes); returns the number of
- * clusters, or -1 when out of memory. */
-static int assign_clusters(const hr_graph *g, int nparts, int32_t *cluster) {
-  double total = 0.0;
-  for (int v = 0; v < g->n; v++) total += g->w[v];
-  const double bound = total / ((double)nparts * CLUSTERS_PER_PART);
-  /* weightless nodes do not fill a cluster, so the node count is bounded as well */
-  int64_t cap = 2 * (int64_t)g->n / ((int64_t)nparts * CLUSTERS_PER_PART);
-  cap = cap > 1 ? cap : 1;
+int hr_partition_cluster(const hr_graph *g, const int32_t *within, double bound, int64_t cap,
+                         int32_t *cluster) {
+  if (!g || !cluster || g->n < 0 || cap < 1) return -1;
   /* one cluster pushes at most once per edge end of its nodes, plus its seed */
-  frontier f = {malloc((size_t)(g->xadj[g->n] + 1) * sizeof *f.e), 0, 0};
+  frontier f = {malloc((size_t)(g->n > 0 ? g->xadj[g->n] + 1 : 1) * sizeof *f.e), 0, 0};
   double *conn = calloc((size_t)(g->n > 0 ? g->n : 1), sizeof *conn);
   int nc = -1;
   if (f.e && conn) {
     nc = 0;
     for (int v = 0; v < g->n; v++) cluster[v] = -1;
     for (int v = 0; v < g->n; v++)
-      if (cluster[v] < 0) grow_cluster(g, v, nc++, bound, cap, cluster, conn, &f);
+      if (cluster[v] < 0) grow_cluster(g, within, v, nc++, bound, cap, cluster, conn, &f);
   }
   free(f.e);
   free(conn);
   return nc;
+}
+
+/* Assigns every node a cluster of about a CLUSTERS_PER_PART-th of a part's share of the weight
+ * (in index order of their first nodes); returns the number of clusters, or -1 when out of
+ * memory. */
+static int assign_clusters(const hr_graph *g, int nparts, int32_t *cluster) {
+  double total = 0.0;
+  for (int v = 0; v < g->n; v++) total += g->w[v];
+  const double bound = total / ((double)nparts * CLUSTERS_PER_PART);
+  /* weightless nodes do not fill a cluster, so the node count is bounded as well */
+  int64_t cap = 2 * (int64_t)g->n / ((int64_t)nparts * CLUSTERS_PER_PART);
+  return hr_partition_cluster(g, NULL, bound, cap > 1 ? cap : 1, cluster);
 }
 
 /* The clustered graph: node weights summed over members, edges between clusters summed over the
@@ -653,6 +694,35 @@ static void sort_members(const int32_t *cluster, int n, int nc, int32_t *members
   first[0] = 0;
 }
 
+int hr_partition_contract(const hr_graph *g, const int32_t *cluster, int nc, int64_t **xadj,
+                          int32_t **adj, double **w, double **c) {
+  *xadj = NULL, *adj = NULL, *w = NULL, *c = NULL;
+  if (!g || !cluster || g->n < 0 || nc < 0) return 0;
+  for (int v = 0; v < g->n; v++)
+    if (cluster[v] < 0 || cluster[v] >= nc) return 0;
+  const size_t n = (size_t)(g->n > 0 ? g->n : 1);
+  int32_t *members = malloc(n * sizeof *members);
+  int64_t *first = malloc(((size_t)nc + 1) * sizeof *first);
+  owned_graph o = {.n = nc};
+  int ok = members && first;
+  if (ok) {
+    sort_members(cluster, g->n, nc, members, first);
+    ok = build_clustered(g, cluster, members, first, &o);
+  }
+  free(members);
+  free(first);
+  if (!ok) {
+    owned_free(&o);
+    return 0;
+  }
+  /* build_clustered sized the edges for the worst case (as many as g's) */
+  const size_t ne = (size_t)(o.xadj[nc] > 0 ? o.xadj[nc] : 1);
+  int32_t *a2 = realloc(o.adj, ne * sizeof *a2);
+  double *c2 = realloc(o.c, ne * sizeof *c2);
+  *xadj = o.xadj, *adj = a2 ? a2 : o.adj, *w = o.w, *c = c2 ? c2 : o.c;
+  return 1;
+}
+
 /* Clusters g, anneals the clustered graph from the majority parts of 'part' and writes the
  * result, projected onto the nodes, into 'out'. Returns 0 when out of memory. */
 static double exact_cost(const hr_graph *g, const int32_t *part, int nparts, double alpha,
@@ -677,7 +747,7 @@ static int grow_parts(const hr_graph *g, int nparts, int32_t *part) {
       while (next < g->n && part[next] >= 0) next++;
       if (next == g->n) break;
       /* grow_cluster stops at 'bound' of its own weight: what this part still needs */
-      const double add = grow_cluster(g, next, p, share - got, g->n, part, conn, &f);
+      const double add = grow_cluster(g, NULL, next, p, share - got, g->n, part, conn, &f);
       got += add;
       if (!(add > 0.0)) break; /* weightless: nothing more to gain */
     }

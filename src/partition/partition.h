@@ -38,6 +38,29 @@ int hr_partition_metis(const hr_graph *g, int nparts, int32_t *part);
  * power of two). */
 int hr_partition_orb(const double *xyz, const double *w, int n, int nparts, int32_t *part);
 
+/* The paper's clustering (2.2.5): from each node not yet in a cluster (in index order), grows a
+ * cluster by adding the unclustered neighbour most strongly connected to it, until it weighs
+ * 'bound' (when > 0) or holds 'cap' (>= 1) nodes or has no such neighbour left; with 'within'
+ * (n values, or NULL) only across edges whose two ends have the same value there, so that
+ * clusters stay inside the parts of a partition. cluster[v] in [0, count); returns the count,
+ * -1 on bad input or out of memory. */
+int hr_partition_cluster(const hr_graph *g, const int32_t *within, double bound, int64_t cap,
+                         int32_t *cluster);
+
+/* The graph of the clusters (cluster[v] in [0, nc)): a node per cluster weighing the sum of its
+ * members, an edge between two clusters weighing the sum of their members' edges between them
+ * (edges inside a cluster are left out). Z of a partition of the clusters equals Z of its
+ * projection on g. The arrays (nc + 1 offsets, then the CSR) are malloc'd for the caller to
+ * free; 0 on bad input or out of memory (and all four NULL). */
+int hr_partition_contract(const hr_graph *g, const int32_t *cluster, int nc, int64_t **xadj,
+                          int32_t **adj, double **w, double **c);
+
+/* The distributed balancing (src/balance.c) clusters each rank's elements into this many
+ * clusters over all ranks (at least HR_PARTITION_CLUSTERS_MIN a rank) before annealing:
+ * measured with bench/partbench (BENCHMARKS.md, "Graph balancing, third pass"). */
+#define HR_PARTITION_CLUSTERS 1024
+#define HR_PARTITION_CLUSTERS_MIN 16
+
 /* The paper's method: clustering (traverse maximum-weight edges from unvisited nodes until a
  * cluster reaches a size bound), simulated annealing of the clustered graph on Z with Metropolis
  * acceptance and a cooling schedule, then the same on the unclustered graph to refine. 'part'
