@@ -128,7 +128,7 @@ typedef struct anneal_state {
   int32_t *journal;
   int64_t njournal;
   int stale;
-  /* NULL, or conn[v * nparts + p] = the weight of v's edges into part p, and eall[v] that of
+  /* NULL, or conn[p * n + v] = the weight of v's edges into part p, and eall[v] that of
    * all of v's edges (self-loops left out of both) */
   double *conn, *eall;
 } anneal_state;
@@ -234,7 +234,7 @@ static void state_init(anneal_state *st, const hr_graph *g, int nparts, double a
       for (int64_t k = g->xadj[v]; k < g->xadj[v + 1]; k++) {
         const int32_t u = g->adj[k];
         if (u == v) continue;
-        st->conn[(size_t)v * np + (size_t)part[u]] += g->c[k];
+        st->conn[(size_t)part[u] * (size_t)g->n + (size_t)v] += g->c[k];
         st->eall[v] += g->c[k];
       }
   }
@@ -266,8 +266,8 @@ static int propose(const anneal_state *st, uint64_t *rng, move *m) {
 static void edges_into(const anneal_state *st, int32_t v, int p, int q, double *ep, double *eq,
                        double *eall) {
   if (st->conn) {
-    *ep = st->conn[(size_t)v * (size_t)st->nparts + (size_t)p];
-    *eq = st->conn[(size_t)v * (size_t)st->nparts + (size_t)q];
+    *ep = st->conn[(size_t)p * (size_t)st->g->n + (size_t)v];
+    *eq = st->conn[(size_t)q * (size_t)st->g->n + (size_t)v];
     *eall = st->eall[v];
     return;
   }
@@ -312,12 +312,14 @@ static void evaluate(const anneal_state *st, move *m) {
 static void apply_raw(anneal_state *st, const move *m) {
   if (st->conn) {
     const hr_graph *g = st->g;
-    const size_t np = (size_t)st->nparts;
+    /* part-major rows: the two rows touched are walked in the order of v's neighbours */
+    double *from = st->conn + (size_t)m->from * (size_t)g->n;
+    double *to = st->conn + (size_t)m->to * (size_t)g->n;
     for (int64_t k = g->xadj[m->v]; k < g->xadj[m->v + 1]; k++) {
       const int32_t u = g->adj[k];
       if (u == m->v) continue;
-      st->conn[(size_t)u * np + (size_t)m->from] -= g->c[k];
-      st->conn[(size_t)u * np + (size_t)m->to] += g->c[k];
+      from[u] -= g->c[k];
+      to[u] += g->c[k];
     }
   }
   const double cf0 = state_cost(st, m->from), ct0 = state_cost(st, m->to);
@@ -445,7 +447,7 @@ static double walk_drift(const hr_graph *g, int nparts, double alpha, uint64_t s
       for (int p = 0; p < nparts; p++) {
         double e, unused, all;
         edges_into(&scan, v, p, p, &e, &unused, &all);
-        const double te = st.conn[(size_t)v * (size_t)nparts + (size_t)p];
+        const double te = st.conn[(size_t)p * (size_t)g->n + (size_t)v];
         drift = fmax(drift, fabs(te - e) / (all > 0.0 ? all : 1.0));
       }
   }
