@@ -13,6 +13,7 @@
 #   SCALE_OUTPUTS  hrad --outputs (default json,png: the solver and one small picture, not the
 #                  meshes, which would dominate the time and the disk of a million triangles)
 #   SCALE_TIMEOUT  seconds a run may take before it is stopped (default 3600)
+#   SCALE_APPEND   1: add to OUT/scaling.csv instead of starting it again (the plot shows all)
 # Writes OUT/scaling.csv (one row a run: N, threads, triangles, status, wall seconds, the
 # solver's own seconds, peak RSS in MB, elements, links, iterations), each run's stderr as
 # OUT/hall-N-tT.err, the picture of each size as OUT/hall-N.png, and OUT/scaling.png: wall time
@@ -39,8 +40,11 @@ trap 'rm -rf "$tmp"' EXIT
 json() { sed -n "s/^ *\"$1\": \\([0-9.e+-]*\\),*\$/\\1/p" "$2" | head -1; }
 
 csv=$out/scaling.csv
-echo "n_cells,threads,triangles,status,wall_s,solve_s,peak_rss_mb,elements,links,iterations" \
-  > "$csv"
+# SCALE_APPEND=1 adds rows to an existing scaling.csv (runs spread over calls) and plots them all
+if [ "${SCALE_APPEND:-0}" != 1 ] || [ ! -s "$csv" ]; then
+  echo "n_cells,threads,triangles,status,wall_s,solve_s,peak_rss_mb,elements,links,iterations" \
+    > "$csv"
+fi
 for n in $sizes; do
   for t in $threads; do
     err=$out/hall-$n-t$t.err
@@ -94,8 +98,12 @@ done
 
 pic=
 if command -v gnuplot > /dev/null; then
-  # the smallest successful 1-thread run anchors the guides
+  # the smallest successful 1-thread run anchors the guides (else the smallest of any)
   read -r n0 w0 m0 <<< "$(awk -F, '$4 == "ok" && $2 == 1 {print $3, $5, $7; exit}' "$csv")"
+  [ -n "${n0:-}" ] ||
+    read -r n0 w0 m0 <<< "$(awk -F, 'NR > 1 && $4 == "ok" {print $3, $5, $7; exit}' "$csv")"
+  # every thread count in the file
+  threads=$(awk -F, 'NR > 1 && $4 == "ok" {print $2}' "$csv" | sort -un | tr '\n' ' ')
   if [ -n "${n0:-}" ]; then
     for t in $threads; do
       awk -F, -v t="$t" '$4 == "ok" && $2 == t {print $3, $5, $7}' "$csv" > "$tmp/t$t.dat"
@@ -131,7 +139,7 @@ unset multiplot
 EOF
     pic=" and $out/scaling.png"
   else
-    echo "scaling: no successful 1-thread run, no picture" >&2
+    echo "scaling: no successful run, no picture" >&2
   fi
 fi
 echo "scaling: wrote $csv$pic" >&2
