@@ -10,11 +10,13 @@
  * balancing, the work of a few iterations was too bursty to predict the next ones, and museum
  * at 2 ranks migrated at all 8 balancings); edges are the links (an element receives from
  * another: weight 1 per link, what a cut link costs in store messages and ghost state) and the
- * tree edges (parent and child: weight 2, a push and a pull). Rank 0 gathers it; for
- * annealing every rank runs its own chain from the same start (ORB's partition) with its own
- * seed, and the best Z wins (the paper's parallel annealing, its reference [1], one period). A
- * new partition is expressed as a subtree map: an element is listed only where its rank differs
- * from its parent's. */
+ * tree edges (parent and child: weight 2, a push and a pull). For METIS and ORB rank 0
+ * gathers it whole (plan_gathered). For annealing (plan_clustered) it is never assembled: each
+ * rank clusters its own elements and folds its links into cluster pairs, and every rank runs
+ * its own chain on the graph of the clusters from the current owners with its own seed; the
+ * best Z wins (the paper's parallel annealing, its reference [1], one period). A new partition
+ * is expressed as a subtree map: an element is listed only where its rank differs from its
+ * parent's. */
 #include "cluster.h"
 #include "mpi/dist.h"
 #include "partition/partition.h"
@@ -501,6 +503,7 @@ static hr_status share_clusters(hr_solver *s, int32_t *ecl) {
   if (st != HR_OK) return st;
   hr_dist_bcast(s->dist, &nall, sizeof nall);
   gid_cluster *pairs = s->rank == 0 ? all : malloc((size_t)(nall + 1) * sizeof *pairs);
+  if (s->rank != 0) free(all); /* (what the others receive is empty) */
   uint64_t *gid = malloc((size_t)(nall + 1) * sizeof *gid);
   if (!pairs || !gid) hr_dist_abort(s->dist, 1);
   hr_dist_bcast(s->dist, pairs, (size_t)nall * sizeof *pairs);
@@ -521,7 +524,7 @@ static hr_status share_clusters(hr_solver *s, int32_t *ecl) {
  * gather_graph's, summed over the clusters) and given to every rank. A collective. */
 static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, int32_t K, const int64_t *recv,
                                bgraph *g) {
-  const int64_t cap = 2 * (s->nlinks + s->nel) + 1;
+  const int64_t cap = s->nlinks + s->nel + 1; /* one entry a link and a tree edge at most */
   half_edge *e = malloc((size_t)cap * sizeof *e), *tmp = malloc((size_t)cap * sizeof *tmp);
   double *w = calloc((size_t)K + 1, sizeof *w);
   if (!e || !tmp || !w) hr_dist_abort(s->dist, 1);
