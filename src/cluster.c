@@ -272,7 +272,41 @@ static int32_t build(builder *b, int32_t lo, int32_t hi) {
   return c;
 }
 
-/* Boxes, spheres, areas, reflectances and N_lm, children before parents. */
+#ifndef NDEBUG
+/* The tree's invariants (asserted in debug builds): n - 1 clusters in preorder, each range
+ * [lo, hi) cut by its two children into [lo, m) and [m, hi) (a surface child: a range of one,
+ * at its place in perm), perm a permutation of the n surfaces. 1 when they hold. */
+static int tree_valid(const hr_clusters *cl, int32_t n) {
+  if (n < 2) return 1;
+  if (cl->n != n - 1) return 0;
+  char *seen = calloc((size_t)n, 1);
+  int ok = seen != NULL;
+  for (int32_t k = 0; ok && k < n; k++) {
+    ok = cl->perm[k] >= 0 && cl->perm[k] < n && !seen[cl->perm[k]];
+    if (ok) seen[cl->perm[k]] = 1;
+  }
+  free(seen);
+  for (int32_t c = 0; ok && c < cl->n; c++) {
+    const cnode *nd = &cl->node[c];
+    int32_t at = nd->lo;
+    for (int q = 0; ok && q < 2; q++) {
+      const int32_t id = nd->child[q];
+      if (id >= 0) {
+        ok = cl->perm[at] == id;
+        at++;
+      } else {
+        const cnode *cc = &cl->node[-1 - id];
+        ok = -1 - id > c && cc->lo == at && cc->hi > cc->lo + 1;
+        at = cc->hi;
+      }
+    }
+    ok = ok && at == nd->hi;
+  }
+  return ok;
+}
+#endif
+
+/* Boxes, spheres, areas, reflectances and N_lm, children before parents. *//* Boxes, spheres, areas, reflectances and N_lm, children before parents. */
 static double acos_clamped(double x) { return acos(x < -1 ? -1 : x > 1 ? 1 : x); }
 
 /* The normal cone of n surfaces: the axis of their area-weighted mean normal (any, with angle
@@ -364,6 +398,7 @@ static hr_status build_tree(hr_solver *s, hr_clusters *cl) {
   builder b = {cl, cen, sbl, sbh, 0};
   cl->n = 0;
   cl->root = n >= 2 ? -1 - build(&b, 0, n) : 0;
+  assert(tree_valid(cl, n));
   free(cen), free(sbl), free(sbh);
   cl->cum[0] = 0;
   for (int k = 0; k < n; k++) cl->cum[k + 1] = cl->cum[k] + s->el[cl->perm[k]].area;
