@@ -267,6 +267,12 @@ static double own_work(const hr_solver *s, int64_t e, const int64_t *recv) {
   return (double)recv[e] + 1.0 + ray_work(s, e);
 }
 
+/* The work this rank accounts for element e: its W where it owns e, else the ray work it did
+ * for e's links (0 if none), which goes to the owner's total. */
+static double held_work(const hr_solver *s, int64_t e, const int64_t *recv) {
+  return hr_owns(s, e) ? own_work(s, e, recv) : ray_work(s, e);
+}
+
 /* Gathers the graph on rank 0 ('g' filled there; zeroed elsewhere). A collective. */
 static hr_status gather_graph(hr_solver *s, bgraph *g, hr_err *err) {
   memset(g, 0, sizeof *g);
@@ -423,10 +429,18 @@ static hr_status plan_gathered(hr_solver *s, int method, int64_t *m, uint64_t **
   const int P = s->nranks;
   double z_now = 0, z_new = 0;
   int32_t *part = NULL, *now = NULL;
+  int ok = 1;
   if (s->rank == 0) {
     part = malloc((size_t)(g.n + 1) * sizeof *part);
     now = malloc((size_t)(g.n + 1) * sizeof *now);
-    if (!part || !now || !partition(&g, method, P, part)) hr_dist_abort(s->dist, 1);
+    ok = part && now && partition(&g, method, P, part);
+  }
+  if (hr_dist_any(s->dist, !ok)) {
+    free(part), free(now);
+    bgraph_free(&g);
+    return hr_err_set(err, HR_ERR_NOMEM, "out of memory (balancing)");
+  }
+  if (s->rank == 0) {
     for (int32_t i = 0; i < g.n; i++) now[i] = hr_owner_of(s, g.gid[i]);
     const hr_graph v = view(&g);
     z_now = hr_partition_cost(&v, now, P, s->bal_alpha, NULL, NULL);
@@ -535,13 +549,10 @@ static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, int32_t K, cons
   }
   for (int64_t i = 0; i < s->nel; i++) {
     if (ecl[i] < 0) continue;
-    if (hr_owns(s, i)) {
-      w[ecl[i]] += own_work(s, i, recv);
-      const int32_t p = s->el[i].parent, b = p >= 0 ? ecl[p] : -1;
-      if (b >= 0 && b != ecl[i]) e[m++] = (half_edge){ecl[i], b, 2.0};
-    } else if (s->erays[i] > 0) {
-      w[ecl[i]] += ray_work(s, i);
-    }
+    w[ecl[i]] += held_work(s, i, recv);
+    if (!hr_owns(s, i)) continue;
+    const int32_t p = s->el[i].parent, b = p >= 0 ? ecl[p] : -1;
+    if (b >= 0 && b != ecl[i]) e[m++] = (half_edge){ecl[i], b, 2.0};
   }
   /* one record per pair (a < b) and per cluster with work: O(links / P) folded to O(pairs) */
   for (int64_t k = 0; k < m; k++)
@@ -603,8 +614,7 @@ static hr_status plan_clustered(hr_solver *s, int64_t *m, uint64_t **gids, int32
   int32_t *ecl = malloc((size_t)(s->nel + 1) * sizeof *ecl);
   if (!recv || !first || !ecl) hr_dist_abort(s->dist, 1);
   double total = 0;
-  for (int64_t i = 0; i < s->nel; i++)
-    total += hr_owns(s, i) ? own_work(s, i, recv) : s->erays[i] > 0 ? ray_work(s, i) : 0.0;
+  for (int64_t i = 0; i < s->nel; i++) total += held_work(s, i, recv);
   hr_dist_sum_f64(s->dist, &total, 1);
   const int per = HR_PARTITION_CLUSTERS / P > HR_PARTITION_CLUSTERS_MIN
                       ? HR_PARTITION_CLUSTERS / P

@@ -189,44 +189,43 @@ static double box_half_area(hr_vec3 lo, hr_vec3 hi) {
  * with the lower bins first (in an order fixed by the input's), and the index of the first of
  * the upper side returned; -1 when all centroids fall in one bin (the caller splits at the
  * median then). */
+/* The SAH bin of surface i, its centroid's key o + t e with t in [0, 1]. */
+static int sah_bin(const builder *b, int32_t i, double o, double e) {
+  const int bin = (int)((key(b, i) - o) / e * SAH_BINS);
+  return bin < 0 ? 0 : bin >= SAH_BINS ? SAH_BINS - 1 : bin;
+}
+
 static int32_t sah_split(builder *b, int32_t lo, int32_t hi, hr_vec3 clo, hr_vec3 ext) {
   hr_clusters *cl = b->cl;
   const double e = b->axis == 0 ? ext.x : b->axis == 1 ? ext.y : ext.z;
   const double o = b->axis == 0 ? clo.x : b->axis == 1 ? clo.y : clo.z;
   if (!(e > 0)) return -1;
+  const hr_vec3 none_lo = {INFINITY, INFINITY, INFINITY}, none_hi = v3_scale(none_lo, -1);
   hr_vec3 bl[SAH_BINS], bh[SAH_BINS];
   int64_t cnt[SAH_BINS] = {0};
+  for (int k = 0; k < SAH_BINS; k++) bl[k] = none_lo, bh[k] = none_hi;
   for (int32_t k = lo; k < hi; k++) {
     const int32_t i = cl->perm[k];
-    int bin = (int)((key(b, i) - o) / e * SAH_BINS);
-    bin = bin < 0 ? 0 : bin >= SAH_BINS ? SAH_BINS - 1 : bin;
-    if (cnt[bin]++ == 0) bl[bin] = b->blo[i], bh[bin] = b->bhi[i];
-    else bl[bin] = v3_min(bl[bin], b->blo[i]), bh[bin] = v3_max(bh[bin], b->bhi[i]);
+    const int bin = sah_bin(b, i, o, e);
+    cnt[bin]++;
+    bl[bin] = v3_min(bl[bin], b->blo[i]), bh[bin] = v3_max(bh[bin], b->bhi[i]);
   }
+  /* the boxes and counts right of each boundary, then a sweep from the left */
   double right[SAH_BINS];
   int64_t nright[SAH_BINS];
-  hr_vec3 rl = {0, 0, 0}, rh = {0, 0, 0};
-  int64_t nr = 0;
+  hr_vec3 sl = none_lo, sh = none_hi;
+  int64_t ns = 0;
   for (int k = SAH_BINS - 1; k >= 1; k--) {
-    if (cnt[k]) {
-      if (nr == 0) rl = bl[k], rh = bh[k];
-      else rl = v3_min(rl, bl[k]), rh = v3_max(rh, bh[k]);
-      nr += cnt[k];
-    }
-    right[k] = nr ? box_half_area(rl, rh) : 0, nright[k] = nr;
+    sl = v3_min(sl, bl[k]), sh = v3_max(sh, bh[k]), ns += cnt[k];
+    right[k] = ns ? box_half_area(sl, sh) : 0, nright[k] = ns;
   }
-  hr_vec3 ll = {0, 0, 0}, lh = {0, 0, 0};
-  int64_t nl = 0;
+  sl = none_lo, sh = none_hi, ns = 0;
   double best = INFINITY;
   int split = -1;
   for (int k = 0; k < SAH_BINS - 1; k++) {
-    if (cnt[k]) {
-      if (nl == 0) ll = bl[k], lh = bh[k];
-      else ll = v3_min(ll, bl[k]), lh = v3_max(lh, bh[k]);
-      nl += cnt[k];
-    }
-    if (nl == 0 || nright[k + 1] == 0) continue;
-    const double c = box_half_area(ll, lh) * (double)nl + right[k + 1] * (double)nright[k + 1];
+    sl = v3_min(sl, bl[k]), sh = v3_max(sh, bh[k]), ns += cnt[k];
+    if (ns == 0 || nright[k + 1] == 0) continue;
+    const double c = box_half_area(sl, sh) * (double)ns + right[k + 1] * (double)nright[k + 1];
     if (c < best) best = c, split = k + 1;
   }
   if (split < 0) return -1;
@@ -234,9 +233,7 @@ static int32_t sah_split(builder *b, int32_t lo, int32_t hi, hr_vec3 clo, hr_vec
   int32_t i = lo, j = hi - 1;
   int32_t *p = cl->perm;
   while (i <= j) {
-    int bi = (int)((key(b, p[i]) - o) / e * SAH_BINS);
-    bi = bi < 0 ? 0 : bi >= SAH_BINS ? SAH_BINS - 1 : bi;
-    if (bi < split) {
+    if (sah_bin(b, p[i], o, e) < split) {
       i++;
       continue;
     }
@@ -306,7 +303,7 @@ static int tree_valid(const hr_clusters *cl, int32_t n) {
 }
 #endif
 
-/* Boxes, spheres, areas, reflectances and N_lm, children before parents. *//* Boxes, spheres, areas, reflectances and N_lm, children before parents. */
+/* Boxes, spheres, areas, reflectances and N_lm, children before parents. */
 static double acos_clamped(double x) { return acos(x < -1 ? -1 : x > 1 ? 1 : x); }
 
 /* The normal cone of n surfaces: the axis of their area-weighted mean normal (any, with angle
