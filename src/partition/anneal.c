@@ -53,9 +53,12 @@ static double part_cost(double alpha, double c, double w) { return alpha * c + (
 static void part_loads(const hr_graph *g, const int32_t *part, int nparts, double *W, double *C) {
   for (int p = 0; p < nparts; p++) W[p] = C[p] = 0.0;
   for (int v = 0; v < g->n; v++) {
-    W[part[v]] += g->w[v];
+    const int32_t pv = part[v];
+    double cv = 0.0; /* a sum of its own: no dependence through C[pv] from edge to edge */
     for (int64_t k = g->xadj[v]; k < g->xadj[v + 1]; k++)
-      if (part[g->adj[k]] != part[v]) C[part[v]] += g->c[k];
+      cv += part[g->adj[k]] != pv ? g->c[k] : 0.0;
+    W[pv] += g->w[v];
+    C[pv] += cv;
   }
 }
 
