@@ -1340,30 +1340,37 @@ static int kid_count(const clink *l, int dec) {
  * per-link output array is needed. */
 #define CHUNK 4096
 
-/* After the decisions dec[0, n) of this rank's links cur (places pos): ex[i], for a link that
- * splits, the place of its first child among the next round's links (offsets from cl->vnext:
- * the children of all ranks' links, numbered in their parents' place order); '*tot' their
- * count. Distributed: '*what' whether some link of some rank becomes an element link
- * (ELEM_LINKS) and whether some rank opens an element that has no children yet (ELEM_SPLITS),
- * and a collective (see scan). '*ex' is allocated. */
+/* After the decisions dec[0, n) of this rank's links cur (places pos): ex[j], for the j-th
+ * link (in index order) that splits, the place of its first child among the next round's links
+ * (offsets from cl->vnext: the children of all ranks' links, numbered in their parents' place
+ * order); '*tot' their count. Distributed: '*what' whether some link of some rank becomes an
+ * element link (ELEM_LINKS) and whether some rank opens an element that has no children yet
+ * (ELEM_SPLITS), and a collective (see scan). '*ex' is allocated. The arrays are as long as
+ * the splitting links, not all: in a sweep over the conference room's 22 M links that keep,
+ * arrays for every link (56 bytes each, a first touch of every page) set the peak memory. */
 enum { ELEM_LINKS = 1, ELEM_SPLITS = 2 };
 static hr_status places(hr_solver *s, const clink *cur, const int64_t *pos, int64_t n,
                         const uint8_t *dec, int64_t **ex, int64_t *tot, int *what, hr_status st,
                         hr_err *err) {
-  scan_rec *q = malloc((size_t)(n > 0 ? n : 1) * sizeof *q);
-  int64_t *k = malloc((size_t)(n > 0 ? n : 1) * sizeof *k);
-  int64_t *v = malloc((size_t)(n > 0 ? n : 1) * sizeof *v);
-  int64_t *e = malloc((size_t)(n > 0 ? n : 1) * sizeof *e), m = 0;
-  *ex = malloc((size_t)(n > 0 ? n : 1) * sizeof **ex);
-  if (st == HR_OK && (!q || !k || !v || !e || !*ex)) st = nomem(err);
+  int64_t m = 0;
   int fl = 0, sorted = 1;
-  for (int64_t i = 0; i < n && st == HR_OK; i++) {
+  for (int64_t i = 0; i < n; i++) {
     const int32_t id = dec[i] == C_SPLIT_R ? cur[i].r : dec[i] == C_SPLIT_S ? cur[i].s : -1;
     fl |= (dec[i] == C_ELEM ? ELEM_LINKS : 0) | (id >= 0 && s->el[id].child < 0 ? ELEM_SPLITS : 0);
+    m += kid_count(&cur[i], dec[i]) > 0;
+  }
+  scan_rec *q = malloc((size_t)(m > 0 ? m : 1) * sizeof *q);
+  int64_t *k = malloc((size_t)(m > 0 ? m : 1) * sizeof *k);
+  int64_t *v = malloc((size_t)(m > 0 ? m : 1) * sizeof *v);
+  int64_t *e = malloc((size_t)(m > 0 ? m : 1) * sizeof *e);
+  *ex = malloc((size_t)(m > 0 ? m : 1) * sizeof **ex);
+  if (st == HR_OK && (!q || !k || !v || !e || !*ex)) st = nomem(err);
+  if (st != HR_OK) m = 0;
+  for (int64_t i = 0, j = 0; j < m; i++) {
     if (kid_count(&cur[i], dec[i]) == 0) continue;
-    q[m] = (scan_rec){pos[i], kid_count(&cur[i], dec[i]), i};
-    sorted &= m == 0 || q[m - 1].key < q[m].key;
-    m++;
+    q[j] = (scan_rec){pos[i], kid_count(&cur[i], dec[i]), j};
+    sorted &= j == 0 || q[j - 1].key < q[j].key;
+    j++;
   }
   if (st == HR_OK && !sorted) qsort(q, (size_t)m, sizeof *q, cmp_scan_rec);
   for (int64_t j = 0; j < m && st == HR_OK; j++) k[j] = q[j].key, v[j] = q[j].v;
@@ -1403,7 +1410,12 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
   /* The first round works on cl's links in place; each later one on the children of the
    * round before ('cur', 'cpos'). The kept links gather in cl->links[0, nout). */
   clink *cur = cl->links;
-  int64_t *cpos = cl->pos, ncur = cl->nlinks, nout = 0, nfirst = 0;
+  int64_t *cpos = cl->pos, ncur = cl->nlinks, nout = 0, nfirst = 0, cur_cap = 0;
+  /* A finished round's links (capacity spare_cap), reused for the children of the round after
+   * next: fresh memory costs a page fault a page (13.5 us each on these virtual machines), and
+   * the arrays alive at any time are the ones that were before (the round before's). */
+  clink *spare = NULL;
+  int64_t *spare_pos = NULL, spare_cap = 0;
   hr_status st = HR_OK;
   int64_t rays = 0, made = 0;
   /* the test hook HRAD_TEST_FAIL=RANK:cluster:ITER: this rank fails within the first round */
@@ -1414,7 +1426,8 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
     const int inplace = round == 0;
     const int64_t nch = (ncur + CHUNK - 1) / CHUNK;
     uint8_t *dec = malloc((size_t)(ncur > 0 ? ncur : 1));
-    int64_t(*cnt)[3] = calloc((size_t)nch + 1, sizeof *cnt); /* keep, element, kids */
+    /* keep, element, kids, splitting links */
+    int64_t(*cnt)[4] = calloc((size_t)nch + 1, sizeof *cnt);
     int64_t *ex = NULL, tot = 0;
     int what = 0;
     if (st == HR_OK && (!dec || !cnt)) st = HR_ERR_NOMEM;
@@ -1432,10 +1445,11 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
           cnt[c + 1][0] += d == C_KEEP || d == C_WEAK;
           cnt[c + 1][1] += d == C_ELEM;
           cnt[c + 1][2] += kid_count(&cur[i], d);
+          cnt[c + 1][3] += kid_count(&cur[i], d) > 0;
         }
       }
       for (int64_t c = 0; c < nch; c++)
-        for (int k = 0; k < 3; k++) cnt[c + 1][k] += cnt[c][k];
+        for (int k = 0; k < 4; k++) cnt[c + 1][k] += cnt[c][k];
     }
     if ((st = places(s, cur, cpos, ncur, dec, &ex, &tot, &what, st, err)) != HR_OK) {
       free(dec), free(cnt), free(ex);
@@ -1457,8 +1471,12 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
     const int64_t nkeep = cnt[nch][0], nelem = cnt[nch][1], nkids = cnt[nch][2];
     if (st == HR_OK && injected == 1) st = HR_ERR_NOMEM, injected = 2;
     if (st == HR_OK && !inplace && reserve(cl, nout + nkeep) != HR_OK) st = HR_ERR_NOMEM;
-    clink *next = malloc((size_t)(nkids > 0 ? nkids : 1) * sizeof *next);
-    int64_t *npos = malloc((size_t)(nkids > 0 ? nkids : 1) * sizeof *npos);
+    /* the children go where the round before last's were, when they fit (see 'spare') */
+    if (spare_cap < nkids) free(spare), free(spare_pos), spare = NULL, spare_pos = NULL;
+    clink *next = spare ? spare : malloc((size_t)(nkids > 0 ? nkids : 1) * sizeof *next);
+    int64_t *npos = spare ? spare_pos : malloc((size_t)(nkids > 0 ? nkids : 1) * sizeof *npos);
+    const int64_t next_cap = spare ? spare_cap : nkids > 0 ? nkids : 1;
+    spare = NULL, spare_pos = NULL, spare_cap = 0;
     hr_link *el = malloc((size_t)(nelem > 0 ? nelem : 1) * sizeof *el);
     uint8_t *eok = calloc((size_t)(nelem > 0 ? nelem : 1), 1);
     if (st == HR_OK && (!next || !el || !eok || !npos)) st = HR_ERR_NOMEM;
@@ -1472,7 +1490,8 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
     num_threads(s->threads)
       for (int64_t c = 0; c < nch; c++) {
         const int64_t hi = (c + 1) * CHUNK < ncur ? (c + 1) * CHUNK : ncur;
-        int64_t ko = inplace ? c * CHUNK : nout + cnt[c][0], eo = cnt[c][1], no = cnt[c][2];
+        int64_t ko = inplace ? c * CHUNK : nout + cnt[c][0], eo = cnt[c][1], no = cnt[c][2],
+                xo = cnt[c][3];
         for (int64_t i = c * CHUNK; i < hi; i++) {
           if (dec[i] == C_KEEP || dec[i] == C_WEAK) {
             if (cur[i].F < 0) estimate(s, &cur[i], dec[i] == C_WEAK, &rays), made++;
@@ -1483,8 +1502,8 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
             eo++;
           } else if (dec[i] == C_SPLIT_R || dec[i] == C_SPLIT_S) {
             const int nk = split(s, &cur[i], dec[i], next + no);
-            for (int k = 0; k < nk; k++) npos[no + k] = cl->vnext + ex[i] + k;
-            no += nk;
+            for (int k = 0; k < nk; k++) npos[no + k] = cl->vnext + ex[xo] + k;
+            no += nk, xo++;
           }
         }
       }
@@ -1501,14 +1520,16 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
     }
     cl->vnext += tot;
     free(dec), free(cnt), free(el), free(eok), free(ex);
-    if (!inplace) free(cur), free(cpos);
-    cur = next, cpos = npos;
+    if (!inplace) spare = cur, spare_pos = cpos, spare_cap = cur_cap;
+    cur = next, cpos = npos, cur_cap = next_cap;
     ncur = st == HR_OK ? nkids : 0;
     if (!dist) continue;
     if (tot == 0 && !(what & ELEM_LINKS)) break; /* every rank: no children, no new links */
     /* the children to their receivers' owners; subscriptions of their ghost sources and of the
      * new element links' */
-    if ((st = route(s, &cur, &cpos, &ncur, st, err)) != HR_OK) break;
+    st = route(s, &cur, &cpos, &ncur, st, err);
+    cur_cap = ncur > 0 ? ncur : 1; /* (route's reallocation) */
+    if (st != HR_OK) break;
     int32_t *src = NULL;
     int64_t nsrc = 0;
     if (ghost_sources(s, cur, ncur, &src, &nsrc) != HR_OK) st = nomem(err);
@@ -1517,6 +1538,7 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
     if (st != HR_OK || tot == 0) break;
   }
   if (cur != cl->links) free(cur), free(cpos);
+  free(spare), free(spare_pos);
   s->rays += rays;
   *nnew += made;
   /* the later rounds' links among the first's */
