@@ -705,6 +705,9 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn) {
     double w[3][9], fi = 0;
     int np[3] = {-1, -1, -1};
     for (int j = 0; j < ns; j++) {
+      /* half of the pairs in clustered museum, and three quarters of the points (they take
+       * the highest order, since one reaches behind the other) */
+      if (hr_ff_pair_dark(&gi, &gs[j])) continue;
       const int o = hr_ff_order(&gi, &gs[j]) - 1;
       if (np[o] < 0) np[o] = hr_ff_points(&gi, o + 1, x[o], w[o]);
       double fij = 0;

@@ -155,6 +155,20 @@ static int some_behind(const hr_ff_elem *a, const hr_ff_elem *b) {
   return 0;
 }
 
+/* 1 when every corner of b is on or behind a's plane. */
+static int all_behind(const hr_ff_elem *a, const hr_ff_elem *b) {
+  for (int k = 0; k < b->nv; k++)
+    if (v3_dot(v3_sub(b->p[k], a->p[0]), a->n) > 0) return 0;
+  return 1;
+}
+
+int hr_ff_pair_dark(const hr_ff_elem *r, const hr_ff_elem *s) {
+  /* a point x of r is a convex combination of r's corners: all on or behind s's plane, so is
+   * x, and hr_ff_point's first test fails; all of s on or behind r's plane, so no corner of s
+   * is in front of x's tangent plane (r's plane), and its clipping leaves nothing */
+  return all_behind(r, s) || all_behind(s, r);
+}
+
 int hr_ff_order(const hr_ff_elem *r, const hr_ff_elem *s) {
   /* Where one element reaches behind the other's plane, the point form factor has a kink or a
    * jump over the receiver: the highest order. */

@@ -22,6 +22,12 @@ typedef struct hr_ff_elem {
  * x's tangent plane). 0 when x is not in front of 's'. This function can't fail. */
 double hr_ff_point(hr_vec3 x, hr_vec3 nx, const hr_ff_elem *s);
 
+/* 1 when the point form factor from 's' is 0 at every point of 'r' (whatever the quadrature):
+ * all of 's' lies on or behind r's plane, or all of 'r' on or behind s's. At most 8 dot
+ * products: hr_ff_point's own tests, made on the corners (at points computed from corners that
+ * lie in the other's plane, rounding can let hr_ff_point return a few 1e-16 instead of 0). */
+int hr_ff_pair_dark(const hr_ff_elem *r, const hr_ff_elem *s);
+
 /* Quadrature order on the receiver (1 = one point, 2 = 2x2 or 3 points, 3 = 3x3 or 6 points)
  * that makes the unoccluded polygon-to-polygon form factor of hr_ff_elem_pair accurate for
  * receiver 'r' and source 's'; chosen from their separation relative to the receiver's size. */

@@ -597,7 +597,8 @@ static hr_status build_lists(hr_solver *s, hr_link *cur, int64_t ncur, const uin
   if (!failed) {
     int64_t tot = 0;
     for (int64_t k = 0; k < nb; k++) tot += lens[k];
-    if (!pool_reserve(&s->pool, &s->cap_pool, s->npool + tot)) failed = 1 + (s->npool + tot > POOL_MAX);
+    if (!pool_reserve(&s->pool, &s->cap_pool, s->npool + tot))
+      failed = 1 + (s->npool + tot > POOL_MAX);
   }
   if (!failed) {
     for (int64_t k = 0; k < nb; k++) {

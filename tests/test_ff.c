@@ -147,6 +147,33 @@ static void kernels(void) {
   CHECK(worst < 5e-3, "pair quadrature off by %.3e", worst);
 }
 
+/* hr_ff_pair_dark: where it says a pair sees nothing, every quadrature point gets exactly 0
+ * (random pairs near each other, all orientations; in general position, so no corner lies in
+ * the other's plane), and it is not a bound that also takes pairs that exchange light. */
+static void dark_pairs(void) {
+  printf("dark pairs (hr_ff_pair_dark)\n");
+  int dark = 0, lit = 0, n = 0, wrong = 0;
+  for (int k = 0; k < 4000; k++, n++) {
+    hr_ff_elem r = rnd_elem(tv(0, 0, 0), rnd_dir(), 1);
+    hr_ff_elem s = rnd_elem(v3_scale(rnd_dir(), 0.3 + 2 * rnd()), rnd_dir(), 0.5 + rnd());
+    const int d = hr_ff_pair_dark(&r, &s);
+    double fmax = 0;
+    for (int order = 1; order <= 3; order++) {
+      double sp = 0;
+      const double f = hr_ff_pair(&r, &s, order, &sp);
+      fmax = fmax > f ? fmax : f;
+      if (d && (f != 0 || sp != 0)) wrong++;
+    }
+    dark += d;
+    lit += !d && fmax > 0;
+  }
+  printf("  %d of %d pairs dark, %d of the others lit, %d dark ones with light\n", dark, n, lit,
+         wrong);
+  CHECK(wrong == 0, "%d pairs called dark get light", wrong);
+  CHECK(dark > n / 5 && dark < 4 * n / 5, "%d of %d pairs dark", dark, n);
+  CHECK(lit > (n - dark) / 2, "only %d of %d pairs not dark get light", lit, n - dark);
+}
+
 int main(void) {
   printf("closed forms vs. REFERENCE-VALUES.md\n");
   CHECK_REL(howell_parallel(1, 1, 1), 0.19982, 1e-4, "Howell parallel 1x1 at 1");
@@ -231,5 +258,6 @@ int main(void) {
     }
   }
   kernels();
+  dark_pairs();
   return t_done("test_ff");
 }
