@@ -10,6 +10,7 @@
  * than the start, which is a candidate itself. Deterministic: one splitmix64 stream per call. */
 #include "partition/partition.h"
 
+#include <assert.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -517,8 +518,11 @@ static hr_graph owned_view(const owned_graph *o) {
 
 /* The frontier of a growing cluster: a max-heap on the connection weight to the cluster, first
  * pushed first among equals (so that equal weights grow the cluster breadth-first, compactly,
- * rather than along a line). Entries go stale when a node's connection grows; those are
- * skipped on pop. */
+ * rather than along a line). Indexed: one entry a node ('at' finds it), whose key and place in
+ * the order change when its connection grows, so the heap holds at most n entries. (With an
+ * entry per push and stale ones skipped it held up to one per edge: 34 MB on museum's graph of
+ * clusters, a first touch of every page at every annealing; the order is the same, since a
+ * connection that did not change kept its first entry there too.) */
 typedef struct heap_entry {
   double key;
   int64_t seq;
@@ -527,39 +531,84 @@ typedef struct heap_entry {
 
 typedef struct frontier {
   heap_entry *e;
+  int32_t *at; /* per node: its entry, or -1 */
   int64_t size, seq;
 } frontier;
+
+/* Room for the n nodes of a graph; 0 when out of memory (free with frontier_free). */
+static int frontier_init(frontier *f, int32_t n) {
+  const size_t m = (size_t)(n > 0 ? n : 1);
+  *f = (frontier){malloc(m * sizeof *f->e), malloc(m * sizeof *f->at), 0, 0};
+  for (int32_t v = 0; f->at && v < n; v++) f->at[v] = -1;
+  return f->e && f->at;
+}
+
+static void frontier_free(frontier *f) {
+  free(f->e);
+  free(f->at);
+}
 
 static int entry_before(const heap_entry *a, const heap_entry *b) {
   return a->key > b->key || (a->key == b->key && a->seq < b->seq);
 }
 
-static void frontier_push(frontier *f, int32_t v, double key) {
-  int64_t i = f->size++;
-  f->e[i] = (heap_entry){key, f->seq++, v};
-  while (i > 0 && entry_before(&f->e[i], &f->e[(i - 1) / 2])) {
-    const heap_entry t = f->e[i];
-    f->e[i] = f->e[(i - 1) / 2];
-    f->e[(i - 1) / 2] = t;
-    i = (i - 1) / 2;
-  }
+static void entry_swap(frontier *f, int64_t i, int64_t j) {
+  const heap_entry t = f->e[i];
+  f->e[i] = f->e[j];
+  f->e[j] = t;
+  f->at[f->e[i].v] = (int32_t)i;
+  f->at[f->e[j].v] = (int32_t)j;
 }
 
-static heap_entry frontier_pop(frontier *f) {
-  const heap_entry top = f->e[0];
-  f->e[0] = f->e[--f->size];
-  for (int64_t i = 0;;) {
+static void sift_up(frontier *f, int64_t i) {
+  for (; i > 0 && entry_before(&f->e[i], &f->e[(i - 1) / 2]); i = (i - 1) / 2)
+    entry_swap(f, i, (i - 1) / 2);
+}
+
+static void sift_down(frontier *f, int64_t i) {
+  for (;;) {
     int64_t m = i;
     const int64_t l = 2 * i + 1, r = 2 * i + 2;
     if (l < f->size && entry_before(&f->e[l], &f->e[m])) m = l;
     if (r < f->size && entry_before(&f->e[r], &f->e[m])) m = r;
-    if (m == i) break;
-    const heap_entry t = f->e[i];
-    f->e[i] = f->e[m];
-    f->e[m] = t;
+    if (m == i) return;
+    entry_swap(f, i, m);
     i = m;
   }
+}
+
+/* v enters the frontier with 'key', or its key becomes 'key' (as pushed now, unless unchanged). */
+static void frontier_push(frontier *f, int32_t v, double key) {
+  const int64_t seq = f->seq++;
+  int64_t i = f->at[v];
+  if (i < 0) {
+    i = f->size++;
+    f->e[i] = (heap_entry){key, seq, v};
+    f->at[v] = (int32_t)i;
+  } else if (f->e[i].key != key) {
+    f->e[i].key = key, f->e[i].seq = seq;
+  } else {
+    return;
+  }
+  sift_up(f, i);
+  sift_down(f, f->at[v]);
+}
+
+static heap_entry frontier_pop(frontier *f) {
+  const heap_entry top = f->e[0];
+  f->at[top.v] = -1;
+  if (--f->size > 0) {
+    f->e[0] = f->e[f->size];
+    f->at[f->e[0].v] = 0;
+    sift_down(f, 0);
+  }
   return top;
+}
+
+/* Empties the frontier, zeroing the connections of the nodes left in it. */
+static void frontier_clear(frontier *f, double *conn) {
+  for (int64_t i = 0; i < f->size; i++) conn[f->e[i].v] = 0.0, f->at[f->e[i].v] = -1;
+  f->size = 0;
 }
 
 /* Grows cluster 'id' from node 'seed': repeatedly adds the unclustered node most strongly
@@ -571,11 +620,10 @@ static double grow_cluster(const hr_graph *g, const int32_t *within, int32_t see
                            frontier *f) {
   double weight = 0.0;
   int64_t size = 0;
-  f->size = 0;
   frontier_push(f, seed, 0.0);
   while (f->size > 0 && !(bound > 0.0 && weight >= bound) && size < cap) {
     const heap_entry top = frontier_pop(f);
-    if (cluster[top.v] >= 0 || top.key != conn[top.v]) continue; /* taken or stale */
+    assert(cluster[top.v] < 0 && top.key == conn[top.v]);
     cluster[top.v] = id;
     conn[top.v] = 0.0;
     weight += g->w[top.v];
@@ -587,25 +635,24 @@ static double grow_cluster(const hr_graph *g, const int32_t *within, int32_t see
       frontier_push(f, u, conn[u]);
     }
   }
-  /* every unclustered node with a connection has an entry left in the heap */
-  for (int64_t i = 0; i < f->size; i++) conn[f->e[i].v] = 0.0;
+  frontier_clear(f, conn); /* every unclustered node with a connection is in it */
   return weight;
 }
 
 int hr_partition_cluster(const hr_graph *g, const int32_t *within, double bound, int64_t cap,
                          int32_t *cluster) {
   if (!g || !cluster || g->n < 0 || cap < 1) return -1;
-  /* one cluster pushes at most once per edge end of its nodes, plus its seed */
-  frontier f = {malloc((size_t)(g->n > 0 ? g->xadj[g->n] + 1 : 1) * sizeof *f.e), 0, 0};
+  frontier f;
+  const int fok = frontier_init(&f, g->n);
   double *conn = calloc((size_t)(g->n > 0 ? g->n : 1), sizeof *conn);
   int nc = -1;
-  if (f.e && conn) {
+  if (fok && conn) {
     nc = 0;
     for (int v = 0; v < g->n; v++) cluster[v] = -1;
     for (int v = 0; v < g->n; v++)
       if (cluster[v] < 0) grow_cluster(g, within, v, nc++, bound, cap, cluster, conn, &f);
   }
-  free(f.e);
+  frontier_free(&f);
   free(conn);
   return nc;
 }
@@ -739,9 +786,10 @@ static double exact_cost(const hr_graph *g, const int32_t *part, int nparts, dou
  * takes the rest. 0 when out of memory. */
 static int grow_parts(const hr_graph *g, int nparts, int32_t *part) {
   const size_t n = (size_t)(g->n > 0 ? g->n : 1);
-  frontier f = {malloc((size_t)(g->xadj[g->n] + 1) * sizeof *f.e), 0, 0};
+  frontier f;
+  const int fok = frontier_init(&f, g->n);
   double *conn = calloc(n, sizeof *conn);
-  int ok = f.e && conn;
+  int ok = fok && conn;
   double left = 0.0;
   for (int v = 0; v < g->n; v++) part[v] = -1, left += g->w[v];
   int next = 0;
@@ -760,7 +808,7 @@ static int grow_parts(const hr_graph *g, int nparts, int32_t *part) {
   }
   for (int v = 0; v < g->n; v++)
     if (part[v] < 0) part[v] = nparts - 1;
-  free(f.e);
+  frontier_free(&f);
   free(conn);
   return ok;
 }
