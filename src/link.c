@@ -1153,6 +1153,24 @@ static int64_t decide_all(hr_solver *s, double bf_e, uint8_t *dec, float *bup) {
   return nsplit0;
 }
 
+/* The kept links of a full pass's first round, packed to the front of its array *cur (in
+ * order: slot[i] <= i), which becomes the kept links' array (capacity cap); *cur is NULL after.
+ * Serial, since a link moves down over others. */
+static hr_link *keep_in_place(hr_link **cur, int64_t n, const uint8_t *dec, const int64_t *slot,
+                              int64_t cap, int64_t *nkeep, int64_t *capkeep) {
+  hr_link *l = *cur;
+  int64_t nk = 0;
+  for (int64_t i = 0; i < n; i++)
+    if (dec[i] == KEEP) {
+      assert(slot[i] == nk && nk <= i);
+      l[slot[i]] = l[i], nk++;
+    }
+  *cur = NULL;
+  *nkeep = nk;
+  *capkeep = cap > 0 ? cap : 1;
+  return l;
+}
+
 hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
   *nnew = 0;
   /* Most iterations split nothing: decide for every link first, without copying the graph. */
@@ -1184,7 +1202,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
    * links make up a quarter of it. */
   int incremental = s->sorted && nsplit0 * 16 < s->nlinks;
   hr_link *cur = NULL, *keep = NULL, *next = NULL;
-  int64_t ncur = 0;
+  int64_t ncur = 0, cap0 = 0;
   if (incremental) {
     cur = malloc((size_t)(nsplit0 > 0 ? nsplit0 : 1) * sizeof *cur);
     if (!cur) st = HR_ERR_NOMEM;
@@ -1202,6 +1220,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     s->sorted = 0;
     ncur = s->nlinks;
     cur = s->links;
+    cap0 = s->cap_links;
     s->links = NULL;
     s->cap_links = 0;
   }
@@ -1250,15 +1269,20 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
     if (st != HR_OK) st = hr_err_set(err, st, "refinement exceeds a limit or is out of memory");
     if ((st = hr_dist_agree(s, st, err)) != HR_OK) goto fail;
     if ((st = hr_link_split_marked(s, mark, s->nel, err)) != HR_OK) goto fail;
-    /* Keep: append in order. */
-    if (nkeep + nk > capkeep) {
+    /* Keep: append in order. The first round of a full pass keeps its links where they are,
+     * packed once its children are made (keep_in_place): a copy of all links meant twice their
+     * memory at once, and a first touch of every page (BENCHMARKS.md, "Memory"). */
+    const int in_place = round == 0 && !incremental;
+    if (in_place) {
+      /* (nothing to copy) */
+    } else if (nkeep + nk > capkeep) {
       int64_t nc = capkeep ? capkeep : 1024;
       while (nc < nkeep + nk) nc *= 2;
       hr_link *k2 = realloc(keep, (size_t)nc * sizeof *k2);
       if (k2) keep = k2, capkeep = nc;
       else st = HR_ERR_NOMEM;
     }
-    if (st == HR_OK) {
+    if (st == HR_OK && !in_place) {
 #pragma omp parallel for schedule(static) if (ncur > PAR_MIN) num_threads(s->threads)
       for (int64_t i = 0; i < ncur; i++)
         if (dec[i] == KEEP) keep[nkeep + slot[i]] = cur[i];
@@ -1271,7 +1295,10 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
                        : hr_err_set(err, HR_ERR_REMOTE, "stopped: another rank failed");
       goto fail;
     }
-    if (more[1] == 0) break;
+    if (more[1] == 0) {
+      if (in_place) keep = keep_in_place(&cur, ncur, dec, slot, cap0, &nkeep, &capkeep);
+      break;
+    }
     /* Children: 4 per split link, candidate capacity = parent's count each. */
     next = malloc((size_t)(4 * nsplit > 0 ? 4 * nsplit : 1) * sizeof *next);
     int64_t pool0 = s->npool;
@@ -1318,6 +1345,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
       }
       s->npool = pool0 + nchild_cand;
       *nnew += 4 * nsplit;
+      if (in_place) keep = keep_in_place(&cur, ncur, dec, slot, cap0, &nkeep, &capkeep);
       free(cur);
       cur = next;
       next = NULL;
