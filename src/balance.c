@@ -23,6 +23,7 @@
 #include "solver_impl.h"
 #include "vec.h"
 
+#include <assert.h>
 #include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -203,6 +204,38 @@ static int csr_build(bgraph *g, half_edge *e, half_edge *tmp, int64_t m) {
     u++;
   }
   for (int32_t i = 0; i < g->n; i++) g->xadj[i + 1] += g->xadj[i];
+  return 1;
+}
+
+/* g's CSR arrays (g->n nodes) from 'up', whose rows hold each edge once, at its lower end, in
+ * neighbour order: both directions, each row in neighbour order (row x gets its lower
+ * neighbours as the rows below x are read, then its own). The same graph as csr_build of both
+ * directions, from a third of the memory: at 13.5 us a fresh page here, that was most of rank
+ * 0's part of a balancing (BENCHMARKS.md, "Graph balancing, fourth pass"). 0 when out of
+ * memory. */
+static int csr_mirror(bgraph *g, const bgraph *up) {
+  const int64_t m = 2 * up->xadj[up->n];
+  g->xadj = calloc((size_t)g->n + 1, sizeof *g->xadj);
+  int64_t *at = malloc(((size_t)g->n + 1) * sizeof *at);
+  g->adj = malloc((size_t)(m + 1) * sizeof *g->adj);
+  g->c = malloc((size_t)(m + 1) * sizeof *g->c);
+  if (!g->xadj || !at || !g->adj || !g->c) {
+    free(at);
+    return 0;
+  }
+  for (int32_t a = 0; a < up->n; a++)
+    for (int64_t k = up->xadj[a]; k < up->xadj[a + 1]; k++)
+      g->xadj[a + 1]++, g->xadj[up->adj[k] + 1]++;
+  for (int32_t i = 0; i < g->n; i++) g->xadj[i + 1] += g->xadj[i];
+  memcpy(at, g->xadj, ((size_t)g->n + 1) * sizeof *at);
+  for (int32_t a = 0; a < up->n; a++)
+    for (int64_t k = up->xadj[a]; k < up->xadj[a + 1]; k++) {
+      const int32_t b = up->adj[k];
+      assert(b > a);
+      g->adj[at[a]] = b, g->c[at[a]++] = up->c[k];
+      g->adj[at[b]] = a, g->c[at[b]++] = up->c[k];
+    }
+  free(at);
   return 1;
 }
 
@@ -584,17 +617,14 @@ static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, int32_t K, cons
     g->n = K;
     g->w = calloc((size_t)K + 1, sizeof *g->w);
     g->xyz = calloc((size_t)(3 * K) + 1, sizeof *g->xyz);
-    half_edge *both = malloc((size_t)(2 * ne + 1) * sizeof *both);
-    tmp = malloc((size_t)(2 * ne + 1) * sizeof *tmp);
-    if (!g->w || !g->xyz || !both || !tmp) hr_dist_abort(s->dist, 1);
+    tmp = malloc((size_t)(ne + 1) * sizeof *tmp);
+    if (!g->w || !g->xyz || !tmp) hr_dist_abort(s->dist, 1);
     for (int64_t j = 0; j < nwall; j++) g->w[((work_rec *)aw)[j].id] += ((work_rec *)aw)[j].w;
-    const half_edge *pe = ae;
-    for (int64_t j = 0; j < ne; j++) {
-      both[2 * j] = pe[j];
-      both[2 * j + 1] = (half_edge){pe[j].b, pe[j].a, pe[j].c};
-    }
-    if (!csr_build(g, both, tmp, 2 * ne)) hr_dist_abort(s->dist, 1);
-    free(both), free(tmp);
+    /* the ranks' pairs (a < b), merged, then both directions */
+    bgraph up = {.n = K};
+    if (!csr_build(&up, ae, tmp, ne) || !csr_mirror(g, &up)) hr_dist_abort(s->dist, 1);
+    bgraph_free(&up);
+    free(tmp);
   }
   free(ae), free(aw), free(w);
   if (st == HR_OK) share_graph(s, g);
