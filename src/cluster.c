@@ -185,16 +185,16 @@ static double box_half_area(hr_vec3 lo, hr_vec3 hi) {
   return e.x * e.y + e.y * e.z + e.z * e.x;
 }
 
-/* The SAH split of perm[lo, hi) along b->axis (centroids from clo over ext): perm rearranged
- * with the lower bins first (in an order fixed by the input's), and the index of the first of
- * the upper side returned; -1 when all centroids fall in one bin (the caller splits at the
- * median then). */
 /* The SAH bin of surface i, its centroid's key o + t e with t in [0, 1]. */
 static int sah_bin(const builder *b, int32_t i, double o, double e) {
   const int bin = (int)((key(b, i) - o) / e * SAH_BINS);
   return bin < 0 ? 0 : bin >= SAH_BINS ? SAH_BINS - 1 : bin;
 }
 
+/* The SAH split of perm[lo, hi) along b->axis (centroids from clo over ext): perm rearranged
+ * with the lower bins first (in an order fixed by the input's), and the index of the first of
+ * the upper side returned; -1 when all centroids fall in one bin (the caller splits at the
+ * median then). */
 static int32_t sah_split(builder *b, int32_t lo, int32_t hi, hr_vec3 clo, hr_vec3 ext) {
   hr_clusters *cl = b->cl;
   const double e = b->axis == 0 ? ext.x : b->axis == 1 ? ext.y : ext.z;
@@ -391,6 +391,10 @@ static hr_status build_tree(hr_solver *s, hr_clusters *cl) {
     cl->srad[i] = r;
   }
   hr_vec3 *sbl = malloc((size_t)n * sizeof *sbl), *sbh = malloc((size_t)n * sizeof *sbh);
+  if (!sbl || !sbh) {
+    free(cen), free(sbl), free(sbh);
+    return HR_ERR_NOMEM;
+  }
   for (int i = 0; i < n; i++) surf_box(&sc->surfs[i], &sbl[i], &sbh[i]);
   builder b = {cl, cen, sbl, sbh, 0};
   cl->n = 0;

@@ -148,18 +148,21 @@ static hr_vec3 vcentroid(const hr_ff_elem *e) {
   return v3_scale(c, 1.0 / e->nv);
 }
 
+/* How many corners of 'b' lie on or behind the plane of 'a'. */
+static int corners_behind(const hr_ff_elem *a, const hr_ff_elem *b) {
+  int n = 0;
+  for (int k = 0; k < b->nv; k++) n += v3_dot(v3_sub(b->p[k], a->p[0]), a->n) <= 0;
+  return n;
+}
+
 /* 1 if some corner of 'b' lies behind the plane of 'a' (b straddles or lies behind it). */
 static int some_behind(const hr_ff_elem *a, const hr_ff_elem *b) {
-  for (int k = 0; k < b->nv; k++)
-    if (v3_dot(v3_sub(b->p[k], a->p[0]), a->n) <= 0) return 1;
-  return 0;
+  return corners_behind(a, b) > 0;
 }
 
 /* 1 when every corner of b is on or behind a's plane. */
 static int all_behind(const hr_ff_elem *a, const hr_ff_elem *b) {
-  for (int k = 0; k < b->nv; k++)
-    if (v3_dot(v3_sub(b->p[k], a->p[0]), a->n) > 0) return 0;
-  return 1;
+  return corners_behind(a, b) == b->nv;
 }
 
 int hr_ff_pair_dark(const hr_ff_elem *r, const hr_ff_elem *s) {

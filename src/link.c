@@ -1273,9 +1273,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
      * packed once its children are made (keep_in_place): a copy of all links meant twice their
      * memory at once, and a first touch of every page (BENCHMARKS.md, "Memory"). */
     const int in_place = round == 0 && !incremental;
-    if (in_place) {
-      /* (nothing to copy) */
-    } else if (nkeep + nk > capkeep) {
+    if (!in_place && nkeep + nk > capkeep) {
       int64_t nc = capkeep ? capkeep : 1024;
       while (nc < nkeep + nk) nc *= 2;
       hr_link *k2 = realloc(keep, (size_t)nc * sizeof *k2);
