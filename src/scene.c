@@ -155,10 +155,7 @@ int hr_scene_poly_object(const hr_scene *s, int poly) {
   return poly >= 0 && poly < s->npolys && s->poly_object ? s->poly_object[poly] : -1;
 }
 
-int hr_scene_poly_material(const hr_scene *s, int poly) {
-  if (poly < 0 || poly >= s->npolys) return -1;
-  /* A polygon's surfaces are consecutive and in order, so 'poly' never decreases over s->surfs:
-   * its first surface by bisection (a scene built otherwise falls back to a scan). */
+int hr_scene_poly_first(const hr_scene *s, int poly) {
   int lo = 0, hi = s->nsurfs;
   while (lo < hi) {
     int mid = lo + (hi - lo) / 2;
@@ -167,10 +164,13 @@ int hr_scene_poly_material(const hr_scene *s, int poly) {
     else
       hi = mid;
   }
-  if (lo < s->nsurfs && s->surfs[lo].poly == poly) return s->mats[s->surfs[lo].material].base;
-  for (int i = 0; i < s->nsurfs; i++)
-    if (s->surfs[i].poly == poly) return s->mats[s->surfs[i].material].base;
-  return -1;
+  return lo < s->nsurfs && s->surfs[lo].poly == poly ? lo : s->nsurfs;
+}
+
+int hr_scene_poly_material(const hr_scene *s, int poly) {
+  if (poly < 0 || poly >= s->npolys) return -1;
+  const int i = hr_scene_poly_first(s, poly);
+  return i < s->nsurfs ? s->mats[s->surfs[i].material].base : -1;
 }
 
 /* Records the object of the polygon just kept (the last one): 0 when out of memory. */
