@@ -692,9 +692,18 @@ static int node_elems(const hr_solver *s, int32_t id, int32_t *out, int max) {
   return nd->hi - nd->lo;
 }
 
+/* How many of a cluster's surfaces its first child holds (its range starts the cluster's). */
+static int first_child_count(const hr_solver *s, int32_t id) {
+  const int32_t c = s->cl->node[-1 - id].child[0];
+  return c >= 0 ? 1 : s->cl->node[-1 - c].hi - s->cl->node[-1 - c].lo;
+}
+
 /* The unoccluded form factor of link (r <- sn), receiver-area mean, by quadrature over the
- * surface pairs, or -1 when the two nodes make more than EXACT_PAIRS surface pairs. */
-static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn) {
+ * surface pairs, or -1 when the two nodes make more than EXACT_PAIRS surface pairs. With 'kids'
+ * (not NULL), also the values of the links its split would make, by the same sums in the same
+ * order as those links would compute them: kids[0][c] for (child c of r <- sn), kids[1][c] for
+ * (r <- child c of sn), -1 where that side is an element. */
+static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn, double kids[2][2]) {
   int32_t er[EXACT_PAIRS], es[EXACT_PAIRS];
   const int nr = node_elems(s, r, er, EXACT_PAIRS), ns = node_elems(s, sn, es, EXACT_PAIRS);
   if (nr < 0 || ns < 0 || nr * ns > EXACT_PAIRS) return -1;
@@ -702,11 +711,13 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn) {
    * made once */
   hr_ff_elem gs[EXACT_PAIRS];
   for (int j = 0; j < ns; j++) gs[j] = hr_elem_geom(s, &s->el[es[j]]);
-  double f = 0, ar = 0;
+  /* the children's surfaces: receivers i < n0 and sources j < m0 are their first child's */
+  const int n0 = r < 0 ? first_child_count(s, r) : nr, m0 = sn < 0 ? first_child_count(s, sn) : ns;
+  double f = 0, ar = 0, fk[2][2] = {{0, 0}, {0, 0}}, ak[2] = {0, 0};
   for (int i = 0; i < nr; i++) {
     const hr_ff_elem gi = hr_elem_geom(s, &s->el[er[i]]);
     hr_vec3 x[3][9];
-    double w[3][9], fi = 0;
+    double w[3][9], fi = 0, fs[2] = {0, 0};
     int np[3] = {-1, -1, -1};
     for (int j = 0; j < ns; j++) {
       /* half of the pairs in clustered museum, and three quarters of the points (they take
@@ -717,10 +728,18 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn) {
       double fij = 0;
       for (int k = 0; k < np[o]; k++) fij += w[o][k] * hr_ff_point(x[o][k], gi.n, &gs[j]);
       fi += fij;
+      fs[j >= m0] += fij;
     }
     f += gi.area * fi;
     ar += gi.area;
+    fk[0][i >= n0] += gi.area * fi, ak[i >= n0] += gi.area;
+    fk[1][0] += gi.area * fs[0], fk[1][1] += gi.area * fs[1];
   }
+  if (kids)
+    for (int c = 0; c < 2; c++) {
+      kids[0][c] = r >= 0 ? -1 : ak[c] > 0 ? fk[0][c] / ak[c] : 0;
+      kids[1][c] = sn >= 0 ? -1 : ar > 0 ? fk[1][c] / ar : 0;
+    }
   return ar > 0 ? f / ar : 0;
 }
 
@@ -736,8 +755,8 @@ static int near_pair(const clink *l) { return kv_of(l) >= NEAR_KV; }
  * 8% on a tessellated furnace). */
 static double link_reg(const clink *l, double as, int k) { return near_pair(l) ? as / k : 0; }
 
-/* The unoccluded form factor of link (r <- sn): exact for small near links (-1 for larger
- * near ones), else from the decision stream's point pairs, without rays. */
+/* The unoccluded form factor of link (r <- sn) from the decision stream's point pairs, without
+ * rays. */
 static double sampled_unoccluded(const hr_solver *s, const clink *l, double as) {
   double w[CL_RAYS_MAX], f = 0;
   int nd;
@@ -745,11 +764,6 @@ static double sampled_unoccluded(const hr_solver *s, const clink *l, double as) 
   const int m = draw(s, l->r, l->s, k, 1, link_reg(l, as, k), w, NULL, NULL, &nd);
   for (int q = 0; q < m; q++) f += w[q];
   return nd > 0 ? f * as / nd : 0;
-}
-static double unoccluded(const hr_solver *s, const clink *l, double as) {
-  if (near_pair(l)) /* -1 (no estimate) without the exact value: a few samples of a near pair */
-    return exact_unoccluded(s, l->r, l->s); /* were measured up to 13x low */
-  return sampled_unoccluded(s, l, as);
 }
 
 /* Below this normalisation (per unit receiver area; 1/4 for an even spread) a cluster link's
@@ -779,7 +793,7 @@ static void estimate(const hr_solver *s, clink *l, int weak, int64_t *rays) {
   /* the decision's exact value where it has one (fu2 is twice it; 2: none) */
   const double fu = !near_pair(l) ? -1
                     : l->fu2 >= 0 && l->fu2 < 2 ? 0.5 * l->fu2
-                                                : exact_unoccluded(s, l->r, l->s);
+                                                : exact_unoccluded(s, l->r, l->s, NULL);
   /* exact times the visible fraction (0 when no sample counts: taking 1, as hr_vf_pair does,
    * made museum's walls 3% too bright) */
   if (fu >= 0) f = wsum > 0 ? fu * f / wsum : 0;
@@ -1241,10 +1255,18 @@ static int link_geometry(const hr_solver *s, clink *l) {
   return cones_face(s, l, cr, cs, dl, rr + rs);
 }
 
+/* A link whose parent computed its exact unoccluded form factor carries it in F (fu2 says so)
+ * until decided; a link that splits with its children's values (exact_unoccluded's 'kids')
+ * holds them in F and kf for split() to hand down. Neither has been estimated: F is free. */
+#define FU2_INHERITED (-2.0f)
+#define FU2_KIDS (-3.0f)
+
 /* Keep, drop, split a side, or make it an element link. */
 static int decide(const hr_solver *s, clink *l, double bf_e) {
   const hr_clusters *cl = s->cl;
   const hr_scene *sc = s->scene;
+  float inherited = -1;
+  if (l->fu2 == FU2_INHERITED) inherited = l->F, l->F = -1, l->fu2 = -1;
   if (l->r >= 0 && l->s >= 0) return l->r == l->s ? C_DROP : C_ELEM;
   if (l->r == l->s) return C_SPLIT_R;
   if (l->fb < 0) {
@@ -1276,17 +1298,27 @@ static int decide(const hr_solver *s, clink *l, double bf_e) {
   if (l->fu2 < 0 && lim == 0 && near_pair(l) && sampled_unoccluded(s, l, as) > 0) l->fu2 = 2;
   /* Near clusters: the bound says nothing (1 where the spheres meet), so the unoccluded form
    * factor from the link's own point pairs, doubled for its noise, stands in for it. */
+  double kids[2][2] = {{-1, -1}, {-1, -1}};
   if (l->fu2 < 0) {
-    const double fu = unoccluded(s, l, as);
+    /* a near link: exact (a few samples of a near pair were measured up to 13x low), from its
+     * parent's sums where it has them (the same value) */
+    const double fu = !near_pair(l)   ? sampled_unoccluded(s, l, as)
+                      : inherited >= 0 ? 0.5 * inherited
+                                       : exact_unoccluded(s, l->r, l->s, kids);
     l->fu2 = fu >= 0 ? (float)(2 * fu) : 2; /* 2: no estimate (never below fb <= 1) */
+    /* the parent's sums are this link's own, bit for bit */
+    assert(!(near_pair(l) && inherited >= 0) ||
+           (float)(2 * exact_unoccluded(s, l->r, l->s, NULL)) == inherited);
   }
   if (l->fu2 >= 0 && l->fu2 < l->fb && rho * l->fu2 * b <= lim)
     return rho * l->fu2 * b <= 0.25 * lim ? C_WEAK : C_KEEP;
   /* the larger side opens (a cluster always can; an element above A_e) */
   const int okr = node_splittable(s, l->r), oks = node_splittable(s, l->s);
-  if (okr && (!oks || rr >= rs)) return C_SPLIT_R;
-  assert(oks); /* one side is a cluster */
-  return C_SPLIT_S;
+  assert(okr || oks); /* one side is a cluster */
+  const int side = okr && (!oks || rr >= rs) ? 0 : 1;
+  if (kids[side][0] >= 0) /* a cluster opens: its children's exact values go with them */
+    l->F = (float)(2 * kids[side][0]), l->kf = (float)(2 * kids[side][1]), l->fu2 = FU2_KIDS;
+  return side == 0 ? C_SPLIT_R : C_SPLIT_S;
 }
 
 /* The children of link l under decision dec into kids (at most 4); returns their count.
@@ -1308,6 +1340,8 @@ static int split(const hr_solver *s, const clink *l, int dec, clink *kids) {
       for (int b = 0; b < nc; b++) kids[n++] = fresh(ch[a], ch[b]);
     } else {
       kids[n++] = dec == C_SPLIT_R ? fresh(ch[a], l->s) : fresh(l->r, ch[a]);
+      if (l->fu2 == FU2_KIDS)
+        kids[n - 1].F = a == 0 ? l->F : l->kf, kids[n - 1].fu2 = FU2_INHERITED;
     }
   }
   return n;
