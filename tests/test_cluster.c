@@ -114,6 +114,18 @@ static double rms_diff(const hr_scene *s, const hr_solver *a, const hr_solver *b
   return sqrt(num / den);
 }
 
+/* 1 when every polygon's radiosity is bit for bit the same in the two solutions. */
+static int same_light(const hr_scene *s, const hr_solver *a, const hr_solver *b) {
+  int same = 1;
+  for (int p = 0; p < s->npolys; p++) {
+    double x[3], y[3];
+    hr_solver_poly_radiosity(a, p, x);
+    hr_solver_poly_radiosity(b, p, y);
+    same &= !memcmp(x, y, sizeof x);
+  }
+  return same;
+}
+
 static void on_off(const char *name, double tol) {
   hr_scene *s;
   hr_err err = {{0}};
@@ -132,14 +144,7 @@ static void on_off(const char *name, double tol) {
   /* threads: bit-identical */
   o.threads = 1;
   hr_solver *one = t_solve(s, &o);
-  int same = 1;
-  for (int p = 0; p < s->npolys; p++) {
-    double x[3], y[3];
-    hr_solver_poly_radiosity(on, p, x);
-    hr_solver_poly_radiosity(one, p, y);
-    same &= !memcmp(x, y, sizeof x);
-  }
-  CHECK(same, "%s: clustering on 1 and 2 threads differs", name);
+  CHECK(same_light(s, on, one), "%s: clustering on 1 and 2 threads differs", name);
   hr_solver_destroy(&one);
   hr_solver_destroy(&on);
   hr_solver_destroy(&off);
@@ -218,13 +223,7 @@ static void threads_same(const char *name, double bf_low) {
   hr_solver *one = t_solve(s, &o);
   o.threads = 2;
   hr_solver *two = t_solve(s, &o);
-  int same = 1;
-  for (int p = 0; p < s->npolys; p++) {
-    double x[3], y[3];
-    hr_solver_poly_radiosity(one, p, x);
-    hr_solver_poly_radiosity(two, p, y);
-    same &= !memcmp(x, y, sizeof x);
-  }
+  const int same = same_light(s, one, two);
   printf("%-8s clustered, BF_low %g: 1 and 2 threads %s\n", name, bf_low,
          same ? "bit-identical" : "DIFFER");
   CHECK(same, "%s: clustering on 1 and 2 threads differs", name);
