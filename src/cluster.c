@@ -1287,6 +1287,20 @@ static int link_geometry(const hr_solver *s, clink *l) {
 #define FU2_INHERITED (-2.0f)
 #define FU2_KIDS (-3.0f)
 
+/* Asks for what decide reads of source node id (its radiosity, mean and range) ahead of
+ * need: the sources of a receiver's links lie anywhere, and a sweep over links that stay is
+ * mostly waiting for them. */
+static void prefetch_source(const hr_solver *s, int32_t id) {
+  if (id >= 0) {
+    __builtin_prefetch(s->Bs[id]);
+    __builtin_prefetch(&s->bvar[id]);
+  } else {
+    __builtin_prefetch(s->cl->Bm[-1 - id]);
+    __builtin_prefetch(&s->cl->bhi[-1 - id]);
+    __builtin_prefetch(&s->cl->blo[-1 - id]);
+  }
+}
+
 /* Keep, drop, split a side, or make it an element link. */
 static int decide(const hr_solver *s, clink *l, double bf_e) {
   const hr_clusters *cl = s->cl;
@@ -1406,6 +1420,8 @@ static int kid_count(const clink *l, int dec) {
  * beforehand, so that the work runs in parallel, its order does not depend on threads and no
  * per-link output array is needed. */
 #define CHUNK 4096
+/* How many links ahead decide's source data is asked for (prefetch_source). */
+#define PREFETCH_AHEAD 8
 
 /* After the decisions dec[0, n) of this rank's links cur (places pos): ex[j], for the j-th
  * link (in index order) that splits, the place of its first child among the next round's links
@@ -1526,6 +1542,7 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
       for (int64_t c = 0; c < nch; c++) {
         const int64_t hi = (c + 1) * CHUNK < ncur ? (c + 1) * CHUNK : ncur;
         for (int64_t i = c * CHUNK; i < hi; i++) {
+          if (i + PREFETCH_AHEAD < hi) prefetch_source(s, cur[i + PREFETCH_AHEAD].s);
           const int d = decide(s, &cur[i], bf_e);
           dec[i] = (uint8_t)d;
           cnt[c + 1][0] += d == C_KEEP || d == C_WEAK;
