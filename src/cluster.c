@@ -1069,7 +1069,7 @@ static hr_status regroup(hr_clusters *cl, int64_t n0, int64_t n, int threads) {
     top[c] = hi;
   }
   int64_t i = n0 - 1;
-  for (int64_t k = n - 1; k >= 0 && k > i; k--) {
+  for (int64_t k = n - 1; k > i; k--) {
     int b = -1; /* the chunk whose last link comes last */
     for (int c = 0; c < nc; c++)
       if (top[c] > chunk_lo(m, c, nc) && (b < 0 || placed_before(&t[top[b] - 1], &t[top[c] - 1])))
