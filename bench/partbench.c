@@ -16,7 +16,13 @@
  * partitioning time except for dist-anneal, whose clustering and contraction each rank does
  * for its own elements (1/P of the measured time) before every rank runs a chain: here the P
  * chains run one after another ("time ms" is all of them), and "P-rank ms" counts the median
- * one. */
+ * one. dist-anneal starts, as the solver does, from whole surfaces by area, or in a clustered
+ * run's graph (nodes with the top gid bit) from preorder runs of the hierarchy, and cuts each
+ * part's tree into pieces (hr_partition_tree_cut).
+ *
+ * Environment: PARTBENCH_METHOD=M only method M (0 random .. 6 dist-anneal), PARTBENCH_P=P only
+ * P parts, PARTBENCH_PIECES=1 prints dist-anneal's piece count, PARTBENCH_GROW=1 makes its
+ * pieces by the paper's growth (hr_partition_cluster) instead, as the solver did before. */
 #include "hrad.h"
 #include "partition/partition.h"
 
@@ -108,6 +114,9 @@ static int32_t index_of(const graph *G, uint64_t gid) {
   return lo < G->g.n && G->gid[lo] == gid ? lo : -1;
 }
 
+/* A cluster of a clustered run's graph (cluster.h: gids with the top bit). */
+static int is_cluster(uint64_t gid) { return (int)(gid >> 63); }
+
 /* The start of a run's first balancing: whole surfaces (an element's tree with its root), here
  * by the work of the tree, largest first, each to the least loaded part. */
 static void whole_surfaces(const graph *G, int P, int32_t *part) {
@@ -117,7 +126,7 @@ static void whole_surfaces(const graph *G, int P, int32_t *part) {
   int32_t *rpart = malloc((size_t)(n + 1) * sizeof *rpart);
   for (int v = 0; v < n; v++) { /* parents have smaller gids? not assumed: follow the chain */
     int32_t r = v, p;
-    while (G->pgid[r] && (p = index_of(G, G->pgid[r])) >= 0) r = p;
+    while (G->pgid[r] && !is_cluster(G->pgid[r]) && (p = index_of(G, G->pgid[r])) >= 0) r = p;
     root[v] = r;
     tw[r] += G->g.w[v];
   }
@@ -158,17 +167,32 @@ static void tree_graph(const graph *G, hr_graph *t) {
 static int dist_anneal(const graph *G, int P, double alpha, int32_t *part, double *local,
                        double *chain) {
   const hr_graph *g = &G->g;
-  whole_surfaces(G, P, part); /* the start is given in a run: not timed */
+  /* the start is given in a run: not timed. With clusters, ORB of all nodes: a spatial start
+   * lets the clustering along the tree (clusters included) make pieces of the scene, where
+   * whole surfaces scattered by area leave at least one piece per surface */
+  int clustered = 0;
+  for (int v = 0; v < g->n && !clustered; v++) clustered = is_cluster(G->gid[v]);
+  int32_t *par = malloc((size_t)(g->n + 1) * sizeof *par);
+  for (int v = 0; v < g->n; v++) par[v] = G->pgid[v] ? index_of(G, G->pgid[v]) : -1;
+  if (clustered) hr_partition_preorder(par, g->w, g->n, P, part);
+  else whole_surfaces(G, P, part);
   const double t1 = now();
   int32_t *cl = malloc((size_t)(g->n + 1) * sizeof *cl);
   double total = 0;
   for (int v = 0; v < g->n; v++) total += g->w[v];
   int per = HR_PARTITION_CLUSTERS / P;
   per = per > HR_PARTITION_CLUSTERS_MIN ? per : HR_PARTITION_CLUSTERS_MIN;
-  hr_graph t;
-  tree_graph(G, &t);
-  const int nc = hr_partition_cluster(&t, part, total / ((double)P * per), g->n, cl);
-  free((void *)t.xadj), free((void *)t.adj), free((void *)t.c);
+  int nc;
+  if (getenv("PARTBENCH_GROW")) {
+    hr_graph t;
+    tree_graph(G, &t);
+    nc = hr_partition_cluster(&t, part, total / ((double)P * per), g->n, cl);
+    free((void *)t.xadj), free((void *)t.adj), free((void *)t.c);
+  } else {
+    nc = hr_partition_tree_cut(par, g->w, g->n, part, total / ((double)P * per), cl);
+  }
+  free(par);
+  if (getenv("PARTBENCH_PIECES")) fprintf(stderr, "P %d: %d pieces\n", P, nc);
   int64_t *xadj;
   int32_t *adj, *cpart = malloc((size_t)(nc + 1) * sizeof *cpart);
   int32_t *won = malloc((size_t)(nc + 1) * sizeof *won);
@@ -220,6 +244,8 @@ int main(int argc, char **argv) {
   for (int P = 2; P <= 64; P *= 2)
     for (int m = 0; m < 7; m++) {
       if (m == 5 && !(effort > 0)) continue;
+      if (getenv("PARTBENCH_METHOD") && atoi(getenv("PARTBENCH_METHOD")) != m) continue;
+      if (getenv("PARTBENCH_P") && atoi(getenv("PARTBENCH_P")) != P) continue;
       const double t0 = now();
       int ok = 1;
       double local = 0, chain = 0;

@@ -375,9 +375,11 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uin
 /* Moves elements to other ranks with the links they receive, between iterations: a collective
  * (every rank passes the same arrays). The element with global id gids[i] and every element
  * below it go to rank ranks[i], the deepest listed ancestor deciding; elements below no listed
- * gid go with their surface's root (hr_solver_set_dist). Global ids: hr_solver_leaf_gid. The
- * result of the run does not change (graph balancing, paper 2.2.5, uses it). HR_ERR_INVALID for
- * a bad gid or rank or a solver that is not distributed. */
+ * gid go with their surface's root (hr_solver_set_dist). Global ids: hr_solver_leaf_gid. In a
+ * clustered run an entry whose gid has the top bit set, 1 << 63 | c, names cluster c (of the
+ * solver's hierarchy) instead, and sends the links it receives to rank ranks[i]. The result of
+ * the run does not change (graph balancing, paper 2.2.5, uses it). HR_ERR_INVALID for a bad gid
+ * or rank or a solver that is not distributed. */
 hr_status hr_solver_migrate(hr_solver *s, const uint64_t *gids, const int32_t *ranks, int64_t n,
                             hr_err *err);
 /* Graph balancing (paper 2.2.5; docs/design.md, "Balancing"): the patch/link graph with
@@ -411,6 +413,7 @@ typedef struct hr_rank_stats {
   double elem_mb, link_mb; /* memory of its elements (own and ghosts) and of its links */
   int64_t msgs, msg_bytes; /* point-to-point message batches and bytes it sent */
   int64_t balancings, migrations; /* graph balancings, and those that moved elements */
+  int64_t cluster_moves;  /* clusters whose links balancing moved to another rank (all ranks) */
   int64_t rays;          /* rays it cast */
   int64_t mpi_calls;     /* collectives it took part in */
   int64_t mpi_bytes;     /* bytes it sent in them */

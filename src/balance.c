@@ -268,7 +268,8 @@ static int build_graph(bgraph *g, node_rec *nodes, int64_t nn, edge_rec *ed, int
   }
   for (int32_t i = 0; ok && i < g->n; i++) {
     const int32_t p = g->pgid[i] ? gid_map_get(&map, g->pgid[i]) : -1;
-    if (p < 0) continue;
+    /* none for a cluster: its state is on every rank (cluster.h) */
+    if (p < 0 || g->pgid[i] >> 63) continue;
     e[m++] = (half_edge){i, p, 2.0};
     e[m++] = (half_edge){p, i, 2.0};
   }
@@ -306,31 +307,84 @@ static double held_work(const hr_solver *s, int64_t e, const int64_t *recv) {
   return hr_owns(s, e) ? own_work(s, e, recv) : ray_work(s, e);
 }
 
-/* Gathers the graph on rank 0 ('g' filled there; zeroed elsewhere). A collective. */
-static hr_status gather_graph(hr_solver *s, bgraph *g, hr_err *err) {
+/* The clusters as graph nodes (hr_cluster_graph), with the rays cast for each cluster's links
+ * summed over the ranks (a rank counts what it refined; a cluster's links may have moved
+ * since), and above[e] the cluster over surface root e: malloc'd, every rank. A collective. */
+static hr_cluster_node *cluster_nodes(hr_solver *s, uint64_t *above) {
+  const int64_t K = hr_cluster_count(s);
+  hr_cluster_node *cn = malloc((size_t)(K + 1) * sizeof *cn);
+  double *rays = malloc((size_t)(K + 1) * sizeof *rays);
+  if (!cn || !rays || hr_cluster_graph(s, cn, above) < 0) hr_dist_abort(s->dist, 1);
+  for (int64_t c = 0; c < K; c++) rays[c] = cn[c].rays;
+  hr_dist_sum_f64(s->dist, rays, K);
+  for (int64_t c = 0; c < K; c++) cn[c].rays = rays[c];
+  free(rays);
+  return cn;
+}
+
+/* W of a cluster (as own_work of an element, without the push-pull: the clusters' is done
+ * alike on every rank). */
+static double cluster_work(const hr_solver *s, const hr_cluster_node *c) {
+  return (double)c->recv + RAY_WORK * c->rays / (s->iterations > 1 ? s->iterations : 1);
+}
+
+/* The clusters as graph nodes (with_clusters in gather_graph): this rank's records of the
+ * clusters whose links it holds, at 'nodes'; above[e] gets the cluster over surface root e.
+ * Returns the count. A collective. */
+static int64_t cluster_records(hr_solver *s, node_rec *nodes, uint64_t *above) {
+  const int64_t K = hr_cluster_count(s);
+  hr_cluster_node *cn = cluster_nodes(s, above);
+  int64_t m = 0;
+  for (int64_t c = 0; c < K; c++)
+    if (cn[c].mine)
+      nodes[m++] = (node_rec){cn[c].gid, cn[c].parent, cluster_work(s, &cn[c]),
+                              {cn[c].xyz[0], cn[c].xyz[1], cn[c].xyz[2]}};
+  free(cn);
+  return m;
+}
+
+/* Gathers the graph on rank 0 ('g' filled there; zeroed elsewhere). A collective. With
+ * 'with_clusters' (--dump-graph of a clustered run) the clusters are nodes too: W the links
+ * they receive and the rays cast for them, parents their parent clusters (a surface root's is
+ * the cluster above it), and edges the links they receive from surfaces (links from clusters,
+ * and tree edges to clusters, cost no messages: the clusters' state is on every rank). */
+static hr_status gather_graph(hr_solver *s, bgraph *g, int with_clusters, hr_err *err) {
   memset(g, 0, sizeof *g);
+  const int64_t K = with_clusters ? hr_cluster_count(s) : 0;
+  const int64_t ncl = K > 0 ? hr_cluster_links(s) : 0;
   int64_t nrec = 0, nl = 0; /* node records: own elements, and others' with rays cast here */
   for (int64_t e = 0; e < s->nel; e++) nrec += hr_owns(s, e) || s->erays[e] > 0;
   for (int64_t k = 0; k < s->nlinks; k++) nl += s->links[k].Fu >= 0;
-  node_rec *nodes = malloc((size_t)(nrec + 1) * sizeof *nodes);
-  edge_rec *ed = malloc((size_t)(nl + 1) * sizeof *ed);
+  node_rec *nodes = malloc((size_t)(nrec + K + 1) * sizeof *nodes);
+  edge_rec *ed = malloc((size_t)(nl + ncl + 1) * sizeof *ed);
+  uint64_t *above = calloc((size_t)(K > 0 ? s->scene->nsurfs : 0) + 1, sizeof *above);
   int64_t *recv = recv_counts(s);
-  if (!nodes || !ed || !recv) hr_dist_abort(s->dist, 1); /* every rank must take part */
-  int64_t i = 0;
+  if (!nodes || !ed || !recv || !above) hr_dist_abort(s->dist, 1); /* all must take part */
+  int64_t i = K > 0 ? cluster_records(s, nodes + nrec, above) : 0;
+  nrec += i;
+  i = 0;
   for (int64_t e = 0; e < s->nel; e++) {
     if (!hr_owns(s, e)) {
       if (s->erays[e] > 0) nodes[i++] = (node_rec){s->el[e].gid, EXTRA, ray_work(s, e), {0}};
       continue;
     }
     const int32_t p = s->el[e].parent;
-    nodes[i++] = (node_rec){s->el[e].gid, p >= 0 ? s->el[p].gid : 0, own_work(s, e, recv),
-                            {s->el[e].c.x, s->el[e].c.y, s->el[e].c.z}};
+    nodes[i++] = (node_rec){s->el[e].gid, p >= 0 ? s->el[p].gid : K > 0 ? above[e] : 0,
+                            own_work(s, e, recv), {s->el[e].c.x, s->el[e].c.y, s->el[e].c.z}};
   }
   i = 0;
   for (int64_t k = 0; k < s->nlinks; k++)
     if (s->links[k].Fu >= 0)
       ed[i++] = (edge_rec){s->el[s->links[k].r].gid, s->el[s->links[k].s].gid};
-  free(recv);
+  if (K > 0) {
+    uint64_t(*pair)[2] = malloc((size_t)(ncl + 1) * sizeof *pair);
+    if (!pair) hr_dist_abort(s->dist, 1);
+    const int64_t np = hr_cluster_elem_sources(s, pair);
+    for (int64_t k = 0; k < np; k++) ed[i++] = (edge_rec){pair[k][0], pair[k][1]};
+    free(pair);
+    nl = i;
+  }
+  free(recv), free(above);
   void *an = NULL, *ae = NULL;
   int64_t nn = 0, ne = 0;
   hr_status st = to_rank0(s, nodes, nrec, sizeof *nodes, &an, &nn);
@@ -388,13 +442,18 @@ static int partition(const bgraph *g, int method, int P, int32_t *part) {
                                     : hr_partition_orb(g->xyz, g->w, g->n, P, part);
 }
 
+/* A cluster's gid (cluster.h), as against an element's. */
+static int is_cluster(uint64_t gid) { return (int)(gid >> 63); }
+#define CLUSTER_BIT (UINT64_C(1) << 63)
+
 /* The subtree map of a partition: roots always, other elements where their part differs from
  * their parent's. Returns the count; gids and ranks (n each) filled. */
 static int64_t subtree_map(const bgraph *g, const int32_t *part, uint64_t *gids, int32_t *ranks) {
   int64_t m = 0;
   for (int32_t i = 0; i < g->n; i++) {
-    const int32_t p = g->pgid[i] ? node_of(g, g->pgid[i]) : -1;
-    if (p >= 0 && part[p] == part[i]) continue;
+    /* clusters always (their owners are not inherited), and surface roots under them */
+    const int32_t p = g->pgid[i] && !is_cluster(g->pgid[i]) ? node_of(g, g->pgid[i]) : -1;
+    if (!is_cluster(g->gid[i]) && p >= 0 && part[p] == part[i]) continue;
     gids[m] = g->gid[i], ranks[m++] = part[i];
   }
   return m;
@@ -413,12 +472,27 @@ static hr_status share_map(hr_solver *s, int64_t *m, uint64_t **gids, int32_t **
   return HR_OK;
 }
 
-/* The subtree map of a partition of the clusters: each rank lists its own elements that are
- * roots or go to another rank than their parent (whose cluster it knows), rank 0 collects
- * them and every rank gets the map. A collective. */
-static hr_status cluster_map(hr_solver *s, const int32_t *ecl, const int32_t *part, int64_t *m,
-                             uint64_t **gids, int32_t **ranks) {
-  gid_cluster *mine = malloc((size_t)(s->nel + 1) * sizeof *mine);
+/* A clustered run's hierarchy as --balance anneal sees it (H clusters, 0 without): the nodes
+ * (cluster_nodes), the cluster above each surface root, and each cluster's piece (ccl, -1 where
+ * another rank owns it). */
+typedef struct hier {
+  int64_t H;
+  hr_cluster_node *cn;
+  uint64_t *above;
+  int32_t *ccl;
+} hier;
+
+static void hier_free(hier *h) {
+  free(h->cn), free(h->above), free(h->ccl);
+  memset(h, 0, sizeof *h);
+}
+
+/* The subtree map of a partition of the pieces: each rank lists its own elements that are
+ * roots or go to another rank than their parent (whose piece it knows) and its own clusters,
+ * rank 0 collects them and every rank gets the map. A collective. */
+static hr_status cluster_map(hr_solver *s, const int32_t *ecl, const hier *h,
+                             const int32_t *part, int64_t *m, uint64_t **gids, int32_t **ranks) {
+  gid_cluster *mine = malloc((size_t)(s->nel + h->H + 1) * sizeof *mine);
   if (!mine) hr_dist_abort(s->dist, 1);
   int64_t n = 0;
   for (int64_t i = 0; i < s->nel; i++) {
@@ -427,6 +501,8 @@ static hr_status cluster_map(hr_solver *s, const int32_t *ecl, const int32_t *pa
     if (p >= 0 && ecl[p] >= 0 && part[ecl[p]] == r) continue;
     mine[n++] = (gid_cluster){s->el[i].gid, r};
   }
+  for (int64_t c = 0; c < h->H; c++)
+    if (h->ccl[c] >= 0) mine[n++] = (gid_cluster){h->cn[c].gid, part[h->ccl[c]]};
   void *all = NULL;
   int64_t nall = 0;
   hr_status st = to_rank0(s, mine, n, sizeof *mine, &all, &nall);
@@ -457,7 +533,7 @@ static int take_partition(hr_solver *s, double z_now, double z_new) {
 static hr_status plan_gathered(hr_solver *s, int method, int64_t *m, uint64_t **gids,
                                int32_t **ranks, hr_err *err) {
   bgraph g;
-  hr_status st = gather_graph(s, &g, err);
+  hr_status st = gather_graph(s, &g, s->cl != NULL, err);
   if (st != HR_OK) return st;
   const int P = s->nranks;
   double z_now = 0, z_new = 0;
@@ -474,7 +550,9 @@ static hr_status plan_gathered(hr_solver *s, int method, int64_t *m, uint64_t **
     return hr_err_set(err, HR_ERR_NOMEM, "out of memory (balancing)");
   }
   if (s->rank == 0) {
-    for (int32_t i = 0; i < g.n; i++) now[i] = hr_owner_of(s, g.gid[i]);
+    for (int32_t i = 0; i < g.n; i++)
+      now[i] = is_cluster(g.gid[i]) ? hr_cluster_owner(s, (int32_t)(g.gid[i] & ~CLUSTER_BIT))
+                                    : hr_owner_of(s, g.gid[i]);
     const hr_graph v = view(&g);
     z_now = hr_partition_cost(&v, now, P, s->bal_alpha, NULL, NULL);
     z_new = hr_partition_cost(&v, part, P, s->bal_alpha, NULL, NULL);
@@ -496,40 +574,78 @@ static hr_status plan_gathered(hr_solver *s, int method, int64_t *m, uint64_t **
 
 /* ---- the paper's clustering, where the elements are (--balance anneal) -------------------- */
 
-/* Clusters this rank's own elements (hr_partition_cluster) along the tree edges between them,
- * up to 'bound' of work each: ecl[e] gets the cluster (from 0) of each element it owns, -1 for
- * the others. Returns the count, -1 when out of memory. Along the tree only, not the links:
- * the clusters are pieces of surfaces (subtrees, spatially compact), the pass is O(elements),
- * and measured on museum's final graph the partitions came out as good or better than with
- * the links (BENCHMARKS.md, "Graph balancing, third pass"), whose pass took 0.4-0.9 s a
- * balancing at 2 ranks. */
-static int32_t cluster_own(const hr_solver *s, const int64_t *recv, double bound, int32_t *ecl) {
+/* The nodes of the tree that this rank owns, as graph balancing's clustering sees them: its own
+ * elements and, in a clustered run, its own clusters (cn, K of them; 'above' from
+ * cluster_nodes). Local node i is element elem[i] for i < ne, else cluster elem[i]; par[i] is
+ * the local parent (an element's parent, a surface root's cluster above, a cluster's parent)
+ * where this rank owns it, else -1. */
+typedef struct local_tree {
+  int32_t n, ne;
+  int64_t *elem;
+  int32_t *par;
+  double *w;
+} local_tree;
+
+static int local_tree_make(const hr_solver *s, const int64_t *recv, const hr_cluster_node *cn,
+                           int64_t K, const uint64_t *above, local_tree *lt) {
   int32_t *lix = malloc((size_t)(s->nel + 1) * sizeof *lix); /* element -> local node */
-  int64_t *elem = malloc((size_t)(s->nel + 1) * sizeof *elem); /* local node -> element */
-  half_edge *e = malloc((size_t)(2 * s->nel + 1) * sizeof *e);
-  half_edge *tmp = malloc((size_t)(2 * s->nel + 1) * sizeof *tmp);
-  bgraph lg = {0};
-  int32_t *lcl = NULL, nc = -1;
-  if (lix && elem && e && tmp) {
-    for (int64_t i = 0; i < s->nel; i++) lix[i] = hr_owns(s, i) ? (elem[lg.n] = i, lg.n++) : -1;
-    lg.w = malloc((size_t)(lg.n + 1) * sizeof *lg.w);
-    lcl = malloc((size_t)(lg.n + 1) * sizeof *lcl);
-    int64_t m = 0;
-    for (int32_t i = 0; lg.w && i < lg.n; i++) {
-      const int32_t p = s->el[elem[i]].parent, b = p >= 0 ? lix[p] : -1;
-      lg.w[i] = own_work(s, elem[i], recv);
-      if (b < 0) continue;
-      e[m++] = (half_edge){i, b, 2.0};
-      e[m++] = (half_edge){b, i, 2.0};
+  int32_t *cix = malloc((size_t)(K + 1) * sizeof *cix);        /* cluster -> local node */
+  lt->elem = malloc((size_t)(s->nel + K + 1) * sizeof *lt->elem);
+  lt->par = malloc((size_t)(s->nel + K + 1) * sizeof *lt->par);
+  lt->w = malloc((size_t)(s->nel + K + 1) * sizeof *lt->w);
+  const int ok = lix && cix && lt->elem && lt->par && lt->w;
+  lt->n = 0;
+  for (int64_t i = 0; ok && i < s->nel; i++)
+    lix[i] = hr_owns(s, i) ? (lt->elem[lt->n] = i, lt->n++) : -1;
+  lt->ne = lt->n;
+  for (int64_t c = 0; ok && c < K; c++)
+    cix[c] = cn[c].mine ? (lt->elem[lt->n] = c, lt->n++) : -1;
+  for (int32_t i = 0; ok && i < lt->n; i++) {
+    int32_t p = -1;
+    if (i < lt->ne) {
+      const int64_t e = lt->elem[i];
+      const int32_t ep = s->el[e].parent;
+      lt->w[i] = own_work(s, e, recv);
+      if (ep >= 0) p = lix[ep];
+      else if (K > 0) p = cix[above[e] & ~CLUSTER_BIT];
+    } else {
+      const hr_cluster_node *c = &cn[lt->elem[i]];
+      lt->w[i] = cluster_work(s, c);
+      if (c->parent) p = cix[c->parent & ~CLUSTER_BIT];
     }
-    if (lg.w && lcl && csr_build(&lg, e, tmp, m)) {
-      const hr_graph v = view(&lg);
-      nc = hr_partition_cluster(&v, NULL, bound, lg.n > 0 ? lg.n : 1, lcl);
-    }
-    for (int64_t i = 0; nc >= 0 && i < s->nel; i++) ecl[i] = lix[i] >= 0 ? lcl[lix[i]] : -1;
+    lt->par[i] = p;
   }
-  free(lix), free(elem), free(e), free(tmp), free(lcl);
-  bgraph_free(&lg);
+  free(lix), free(cix);
+  return ok;
+}
+
+static void local_tree_free(local_tree *lt) {
+  free(lt->elem), free(lt->par), free(lt->w);
+  memset(lt, 0, sizeof *lt);
+}
+
+/* Clusters this rank's own nodes (local_tree) into pieces of about 'bound' of work, cut from
+ * their tree bottom-up (hr_partition_tree_cut): ecl[e] gets the piece (from 0) of each element
+ * it owns, -1 for the others, and ccl[c] each cluster's (K of them). Returns the count, -1
+ * when out of memory. Along the tree only, not the links: the pieces are subtrees, spatially
+ * compact, the pass is O(nodes), and measured on museum's final graph the partitions came out
+ * as good or better than with the links (BENCHMARKS.md, "Graph balancing, third pass"), whose
+ * pass took 0.4-0.9 s a balancing at 2 ranks. Cut rather than grown from seeds: growth
+ * strands pieces of a tree (BENCHMARKS.md, "Graph balancing, fifth pass"). */
+static int32_t cluster_own(const hr_solver *s, const int64_t *recv, const hier *h, double bound,
+                           int32_t *ecl) {
+  local_tree lt = {0};
+  int32_t *lcl = malloc((size_t)(s->nel + h->H + 1) * sizeof *lcl), nc = -1;
+  if (lcl && local_tree_make(s, recv, h->cn, h->H, h->above, &lt))
+    nc = hr_partition_tree_cut(lt.par, lt.w, lt.n, NULL, bound, lcl);
+  for (int64_t i = 0; nc >= 0 && i < s->nel; i++) ecl[i] = -1;
+  for (int64_t c = 0; nc >= 0 && c < h->H; c++) h->ccl[c] = -1;
+  for (int32_t i = 0; nc >= 0 && i < lt.n; i++) {
+    if (i < lt.ne) ecl[lt.elem[i]] = lcl[i];
+    else h->ccl[lt.elem[i]] = lcl[i];
+  }
+  free(lcl);
+  local_tree_free(&lt);
   return nc;
 }
 
@@ -569,17 +685,30 @@ static hr_status share_clusters(hr_solver *s, int32_t *ecl) {
 /* The graph of the clusters, assembled on rank 0 from what each rank folds of its own links,
  * tree edges and work (cluster pairs and sums: the graph's edge and node weights as
  * gather_graph's, summed over the clusters) and given to every rank. A collective. */
-static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, int32_t K, const int64_t *recv,
-                               bgraph *g) {
-  const int64_t cap = s->nlinks + s->nel + 1; /* one entry a link and a tree edge at most */
+static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, const hier *h, int32_t K,
+                               const int64_t *recv, bgraph *g) {
+  const int64_t ncl = h->H > 0 ? hr_cluster_links(s) : 0;
+  /* one entry a link and a tree edge at most */
+  const int64_t cap = s->nlinks + ncl + s->nel + 1;
   half_edge *e = malloc((size_t)cap * sizeof *e), *tmp = malloc((size_t)cap * sizeof *tmp);
   double *w = calloc((size_t)K + 1, sizeof *w);
-  if (!e || !tmp || !w) hr_dist_abort(s->dist, 1);
+  uint64_t(*pair)[2] = malloc((size_t)(ncl + 1) * sizeof *pair);
+  if (!e || !tmp || !w || !pair) hr_dist_abort(s->dist, 1);
   int64_t m = 0;
   for (int64_t k = 0; k < s->nlinks; k++) {
     const int32_t a = ecl[s->links[k].r], b = ecl[s->links[k].s];
     if (s->links[k].Fu >= 0 && a >= 0 && b >= 0 && a != b) e[m++] = (half_edge){a, b, 1.0};
   }
+  /* the clusters' links from surfaces (gather_graph's edges), and the clusters' work */
+  const int64_t np0 = h->H > 0 ? hr_cluster_elem_sources(s, pair) : 0;
+  for (int64_t k = 0; k < np0; k++) {
+    const int32_t src = hr_elem_find(s, pair[k][1]);
+    const int32_t a = h->ccl[pair[k][0] & ~CLUSTER_BIT], b = src >= 0 ? ecl[src] : -1;
+    if (a >= 0 && b >= 0 && a != b) e[m++] = (half_edge){a, b, 1.0};
+  }
+  free(pair);
+  for (int64_t c = 0; c < h->H; c++)
+    if (h->ccl[c] >= 0) w[h->ccl[c]] += cluster_work(s, &h->cn[c]);
   for (int64_t i = 0; i < s->nel; i++) {
     if (ecl[i] < 0) continue;
     w[ecl[i]] += held_work(s, i, recv);
@@ -643,27 +772,39 @@ static hr_status plan_clustered(hr_solver *s, int64_t *m, uint64_t **gids, int32
   int64_t *recv = recv_counts(s), *first = calloc((size_t)P + 1, sizeof *first);
   int32_t *ecl = malloc((size_t)(s->nel + 1) * sizeof *ecl);
   if (!recv || !first || !ecl) hr_dist_abort(s->dist, 1);
+  hier h = {0};
+  if (s->cl) { /* a clustered run: its clusters are nodes too */
+    h.H = hr_cluster_count(s);
+    h.above = calloc((size_t)s->scene->nsurfs + 1, sizeof *h.above);
+    h.ccl = malloc((size_t)(h.H + 1) * sizeof *h.ccl);
+    if (!h.above || !h.ccl) hr_dist_abort(s->dist, 1);
+    h.cn = cluster_nodes(s, h.above);
+  }
   double total = 0;
   for (int64_t i = 0; i < s->nel; i++) total += held_work(s, i, recv);
+  for (int64_t c = 0; c < h.H; c++) total += h.cn[c].mine ? cluster_work(s, &h.cn[c]) : 0;
   hr_dist_sum_f64(s->dist, &total, 1);
   const int per = HR_PARTITION_CLUSTERS / P > HR_PARTITION_CLUSTERS_MIN
                       ? HR_PARTITION_CLUSTERS / P
                       : HR_PARTITION_CLUSTERS_MIN;
-  const int32_t nc = cluster_own(s, recv, total / ((double)P * per), ecl);
+  const int32_t nc = cluster_own(s, recv, &h, total / ((double)P * per), ecl);
   if (nc < 0) hr_dist_abort(s->dist, 1);
   first[s->rank + 1] = nc; /* cluster ids: rank r's from first[r] */
   hr_dist_sum_i64(s->dist, first + 1, P);
   for (int r = 0; r < P; r++) first[r + 1] += first[r];
   for (int64_t i = 0; i < s->nel; i++)
     if (ecl[i] >= 0) ecl[i] += (int32_t)first[s->rank];
+  for (int64_t c = 0; c < h.H; c++)
+    if (h.ccl[c] >= 0) h.ccl[c] += (int32_t)first[s->rank];
   const int32_t K = (int32_t)first[P];
   bgraph g;
   hr_status st = share_clusters(s, ecl);
-  if (st == HR_OK) st = fold_clusters(s, ecl, K, recv, &g);
+  if (st == HR_OK) st = fold_clusters(s, ecl, &h, K, recv, &g);
   free(recv);
   *m = -1;
   if (st != HR_OK) {
     free(first), free(ecl);
+    hier_free(&h);
     return hr_dist_agree(s, hr_err_set(err, st, "out of memory (balancing)"), err);
   }
   int32_t *now = malloc((size_t)(K + 1) * sizeof *now);
@@ -682,9 +823,10 @@ static hr_status plan_clustered(hr_solver *s, int64_t *m, uint64_t **gids, int32
     hr_dist_bcast_from(s->dist, win, part, (size_t)K * sizeof *part);
     const double z_now = hr_partition_cost(&v, now, P, s->bal_alpha, NULL, NULL);
     const double z_new = hr_partition_cost(&v, part, P, s->bal_alpha, NULL, NULL);
-    if (take_partition(s, z_now, z_new)) st = cluster_map(s, ecl, part, m, gids, ranks);
+    if (take_partition(s, z_now, z_new)) st = cluster_map(s, ecl, &h, part, m, gids, ranks);
   }
   free(now), free(part), free(first), free(ecl);
+  hier_free(&h);
   bgraph_free(&g);
   return st;
 }
@@ -712,7 +854,7 @@ hr_status hr_solver_balance(hr_solver *s, int method, hr_err *err) {
 
 hr_status hr_solver_dump_graph(hr_solver *s, const char *path, hr_err *err) {
   bgraph g;
-  hr_status st = gather_graph(s, &g, err);
+  hr_status st = gather_graph(s, &g, s->cl != NULL, err);
   if (st != HR_OK || s->rank != 0) return st;
   char tmp[4200];
   snprintf(tmp, sizeof tmp, "%s.tmp", path);

@@ -26,6 +26,7 @@
  *    link (link.c) and refine from then on as elements do. */
 #include "cluster.h"
 #include "mpi/dist.h"
+#include "partition/partition.h"
 #include "solver_impl.h"
 #include "vec.h"
 
@@ -94,6 +95,12 @@ struct hr_clusters {
   int64_t *pos;
   int64_t nlinks, cap; /* links, and room for them */
   int64_t vnext;
+  /* per cluster: rays refinement cast here for the links it receives (graph balancing's work,
+   * balance.c; an element's go to s->erays) */
+  float *crays;
+  /* per cluster: the rank that holds the links it receives (drawn from its number, or set by
+   * graph balancing: hr_cluster_set_owners) */
+  int32_t *cown;
 };
 
 const double hr_sh_alpha[9] = {M_PI, 2 * M_PI / 3, 2 * M_PI / 3, 2 * M_PI / 3, M_PI / 4,
@@ -846,9 +853,55 @@ static void estimate(const hr_solver *s, clink *l, int weak, int64_t *rays) {
 /* The rank that holds the links node 'id' receives (0 in one process). */
 static int node_owner(const hr_solver *s, int32_t id) {
   if (!s->dist) return 0;
-  if (id >= 0) return s->eown[id];
-  const uint64_t h = hr_hash4(UINT64_C(0x636c7573746572), (uint64_t)(-1 - id), 0, 0);
-  return (int)(h % (uint64_t)s->nranks);
+  return id >= 0 ? s->eown[id] : s->cl->cown[-1 - id];
+}
+
+/* A cluster's first owner: a rank drawn from its number. */
+static int32_t drawn_owner(const hr_solver *s, int32_t c) {
+  const uint64_t h = hr_hash4(UINT64_C(0x636c7573746572), (uint64_t)c, 0, 0);
+  return s->dist ? (int32_t)(h % (uint64_t)s->nranks) : 0;
+}
+
+/* Graph balancing's start in a clustered run (hr_cluster_init): the hierarchy in preorder,
+ * surface roots weighing their area, cut into runs of equal area, one a rank (see
+ * hr_partition_preorder): each rank's surfaces and clusters are a compact piece of the scene,
+ * whose tree the balancing's clustering can cut into few pieces. Whole surfaces by area,
+ * scattered over the scene, and clusters drawn at random left one piece a cluster (69,046 on
+ * the conference room). Sets rootown and cown. 0 when out of memory. */
+static int spread_by_hierarchy(hr_solver *s) {
+  const hr_clusters *cl = s->cl;
+  const int32_t n = cl->n + s->scene->nsurfs; /* clusters 0..n-1, then the surfaces */
+  int32_t *par = malloc((size_t)n * sizeof *par), *part = malloc((size_t)n * sizeof *part);
+  double *w = malloc((size_t)n * sizeof *w);
+  int ok = par && part && w;
+  for (int32_t v = 0; ok && v < n; v++) par[v] = -1, w[v] = v < cl->n ? 0 : s->el[v - cl->n].area;
+  for (int32_t c = 0; ok && c < cl->n; c++)
+    for (int k = 0; k < 2; k++) {
+      const int32_t ch = cl->node[c].child[k];
+      par[ch < 0 ? -1 - ch : cl->n + ch] = c;
+    }
+  ok = ok && hr_partition_preorder(par, w, n, s->nranks, part);
+  for (int32_t v = 0; ok && v < n; v++) {
+    if (v < cl->n) cl->cown[v] = part[v];
+    else s->rootown[v - cl->n] = part[v];
+  }
+  free(par), free(part), free(w);
+  return ok;
+}
+
+int hr_cluster_owner(const hr_solver *s, int32_t c) { return node_owner(s, -1 - c); }
+
+int hr_cluster_set_owners(hr_solver *s, const uint64_t *gids, const int32_t *ranks, int64_t n) {
+  const uint64_t top = UINT64_C(1) << 63;
+  for (int64_t i = 0; i < n; i++)
+    if ((gids[i] & top) && (!s->cl || (gids[i] & ~top) >= (uint64_t)s->cl->n)) return 0;
+  for (int64_t i = 0; i < n; i++) {
+    if (!(gids[i] & top)) continue;
+    int32_t *o = &s->cl->cown[gids[i] & ~top];
+    s->ncmoved += *o != ranks[i];
+    *o = ranks[i];
+  }
+  return 1;
 }
 
 /* A cluster link between ranks: node ids (node_gid), its place, its eight floats. */
@@ -1147,23 +1200,40 @@ static hr_status route(hr_solver *s, clink **pcur, int64_t **ppos, int64_t *pn, 
   free(out), free(sb), free(at);
   if (st != HR_OK) return st;
   const int64_t nr = nb / (int64_t)sizeof(msg_clink), nt = nstay + nr;
-  placed *all = malloc((size_t)(nt > 0 ? nt : 1) * sizeof *all);
+  /* Where the links that stayed are in link order (migration: a rank's whole list), only the
+   * received ones are sorted, then merged in from the back: sorting all of them took most of
+   * a migration (7 s of 8.6 on the conference room at 2 ranks). Refinement's children come in
+   * place order: all are sorted. */
+  int stayed_sorted = 1;
+  for (int64_t i = 1; i < nstay && stayed_sorted; i++)
+    stayed_sorted = link_before(cur[i - 1].r, pos[i - 1], cur[i].r, pos[i]);
+  const int64_t ns = stayed_sorted ? nr : nt, s0 = stayed_sorted ? 0 : nstay;
+  placed *all = malloc((size_t)(ns > 0 ? ns : 1) * sizeof *all);
   clink *c2 = all ? realloc(cur, (size_t)(nt > 0 ? nt : 1) * sizeof *c2) : NULL;
   if (c2) cur = *pcur = c2;
   int64_t *p2 = c2 ? realloc(pos, (size_t)(nt > 0 ? nt : 1) * sizeof *p2) : NULL;
   if (p2) pos = *ppos = p2;
   st = p2 ? HR_OK : HR_ERR_NOMEM;
-  for (int64_t i = 0; i < nstay && st == HR_OK; i++) all[i] = (placed){pos[i], cur[i]};
+  for (int64_t i = 0; i < s0 && st == HR_OK; i++) all[i] = (placed){pos[i], cur[i]};
   for (int64_t i = 0; i < nr && st == HR_OK; i++) {
     msg_clink m;
     memcpy(&m, (const char *)in + i * (int64_t)sizeof m, sizeof m);
-    all[nstay + i].pos = m.pos;
-    st = unpack(s, &m, &all[nstay + i].l);
+    all[s0 + i].pos = m.pos;
+    st = unpack(s, &m, &all[s0 + i].l);
   }
   free(in);
   if (st == HR_OK) {
-    sort_placed(all, nt);
-    for (int64_t i = 0; i < nt; i++) cur[i] = all[i].l, pos[i] = all[i].pos;
+    sort_placed(all, ns);
+    if (stayed_sorted) { /* merged from the back: the stayed links' tail is free */
+      int64_t i = nstay - 1, j = nr - 1;
+      for (int64_t k = nt - 1; j >= 0; k--) {
+        if (i >= 0 && link_before(all[j].l.r, all[j].pos, cur[i].r, pos[i]))
+          cur[k] = cur[i], pos[k] = pos[i], i--;
+        else cur[k] = all[j].l, pos[k] = all[j].pos, j--;
+      }
+    } else {
+      for (int64_t i = 0; i < nt; i++) cur[i] = all[i].l, pos[i] = all[i].pos;
+    }
     *pn = nt;
   }
   free(all);
@@ -1503,6 +1573,14 @@ static hr_status split_dist(hr_solver *s, const clink *cur, int64_t n, const uin
   return st;
 }
 
+/* Rays cast for a link that node r receives, to its work (balance.c). A receiver's links can
+ * fall in two threads' chunks: atomic. */
+static void count_rays(hr_solver *s, int32_t r, float cast) {
+  float *w = r >= 0 ? &s->erays[r] : &s->cl->crays[-1 - r];
+#pragma omp atomic
+  *w += cast;
+}
+
 hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
   hr_clusters *cl = s->cl;
   if (!cl) return HR_OK;
@@ -1600,6 +1678,7 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
         int64_t ko = inplace ? c * CHUNK : nout + cnt[c][0], eo = cnt[c][1], no = cnt[c][2],
                 xo = cnt[c][3];
         for (int64_t i = c * CHUNK; i < hi; i++) {
+          const int64_t r0 = rays;
           if (dec[i] == C_KEEP || dec[i] == C_WEAK) {
             if (cur[i].F < 0) estimate(s, &cur[i], dec[i] == C_WEAK, &rays), made++;
             if (!inplace || ko != i) out[ko] = cur[i], opos[ko] = cpos[i];
@@ -1612,6 +1691,7 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
             for (int k = 0; k < nk; k++) npos[no + k] = cl->vnext + ex[xo] + k;
             no += nk, xo++;
           }
+          if (rays > r0) count_rays(s, cur[i].r, (float)(rays - r0));
         }
       }
       for (int64_t c = 0; inplace && c < nch; c++) {
@@ -1787,6 +1867,10 @@ static hr_status create(hr_solver *s, int64_t n) {
   if (!cl) return HR_ERR_NOMEM;
   s->cl = cl;
   if (build_tree(s, cl) != HR_OK) return HR_ERR_NOMEM;
+  cl->crays = calloc((size_t)cl->n + 1, sizeof *cl->crays);
+  cl->cown = malloc(((size_t)cl->n + 1) * sizeof *cl->cown);
+  if (!cl->crays || !cl->cown) return HR_ERR_NOMEM;
+  for (int32_t c = 0; c < cl->n; c++) cl->cown[c] = drawn_owner(s, c);
   cl->cap = n > 0 ? n : 1;
   cl->links = malloc((size_t)cl->cap * sizeof *cl->links);
   cl->pos = malloc((size_t)cl->cap * sizeof *cl->pos);
@@ -1800,6 +1884,13 @@ hr_status hr_cluster_init(hr_solver *s, hr_err *err) {
     st = hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters (injected by "
                                        "HRAD_TEST_FAIL)");
   else st = hr_cluster_prepare(s, err);
+  /* balanced runs start from compact pieces of the hierarchy (unless the caller chose the
+   * surfaces' ranks or scatters them), before any link exists */
+  if (st == HR_OK && s->dist && s->bal_method != HR_BALANCE_NONE && !s->own_seed &&
+      !s->own_given) {
+    if (!spread_by_hierarchy(s)) st = hr_err_set(err, HR_ERR_NOMEM, "out of memory");
+    for (int64_t e = 0; st == HR_OK && e < s->nel; e++) s->eown[e] = hr_owner_of(s, s->el[e].gid);
+  }
   if ((st = hr_dist_agree(s, st, err)) != HR_OK) return st;
   hr_clusters *cl = s->cl;
   hr_cluster_pull(s); /* radiosities: the emission */
@@ -1893,6 +1984,40 @@ void hr_cluster_recv_counts(const hr_solver *s, int64_t *recv) {
   for (int64_t i = 0; s->cl && i < s->cl->nlinks; i++)
     if (s->cl->links[i].r >= 0) recv[s->cl->links[i].r]++;
 }
+int hr_cluster_graph(const hr_solver *s, hr_cluster_node *out, uint64_t *above) {
+  const hr_clusters *cl = s->cl;
+  if (!cl) return 0;
+  int64_t *recv = calloc((size_t)cl->n + 1, sizeof *recv);
+  if (!recv) return -1;
+  for (int64_t i = 0; i < cl->nlinks; i++)
+    if (cl->links[i].r < 0) recv[-1 - cl->links[i].r]++;
+  for (int32_t c = 0; c < cl->n; c++) out[c].parent = 0;
+  for (int32_t c = 0; c < cl->n; c++) {
+    const cnode *nd = &cl->node[c];
+    out[c].gid = node_gid(s, -1 - c);
+    out[c].mine = node_owner(s, -1 - c) == s->rank;
+    out[c].recv = recv[c];
+    out[c].rays = cl->crays[c];
+    out[c].xyz[0] = nd->c.x, out[c].xyz[1] = nd->c.y, out[c].xyz[2] = nd->c.z;
+    for (int k = 0; k < 2; k++) {
+      const int32_t ch = nd->child[k];
+      if (ch < 0) out[-1 - ch].parent = out[c].gid;
+      else above[ch] = out[c].gid;
+    }
+  }
+  free(recv);
+  return 1;
+}
+
+int64_t hr_cluster_elem_sources(const hr_solver *s, uint64_t (*e)[2]) {
+  int64_t m = 0;
+  for (int64_t i = 0; s->cl && i < s->cl->nlinks; i++) {
+    const clink *l = &s->cl->links[i];
+    if (l->r < 0 && l->s >= 0) e[m][0] = node_gid(s, l->r), e[m++][1] = node_gid(s, l->s);
+  }
+  return m;
+}
+
 size_t hr_cluster_link_bytes(const hr_solver *s) {
   (void)s;
   return sizeof(clink) + sizeof(int64_t);
@@ -1906,7 +2031,7 @@ void hr_cluster_free(hr_clusters **pc) {
   free(cl->rho);
   free(cl->Bm), free(cl->bhi), free(cl->blo), free(cl->bref), free(cl->L), free(cl->tq);
   free(cl->nsht), free(cl->lray), free(cl->links);
-  free(cl->pos);
+  free(cl->pos), free(cl->crays), free(cl->cown);
   free(cl);
   *pc = NULL;
 }

@@ -47,6 +47,29 @@ int64_t hr_cluster_links(const hr_solver *s); /* this rank's */
 /* Adds to recv[e] the count of this rank's cluster links that element e receives (graph
  * balancing's work weights, balance.c). */
 void hr_cluster_recv_counts(const hr_solver *s, int64_t *recv);
+/* Graph balancing's view of the clusters (balance.c; the graph file of --dump-graph). For each
+ * cluster c < hr_cluster_count: its gid (1 << 63 | c), its parent's (0 for the root), its
+ * centre, whether this rank holds the links it receives, and those links and the rays
+ * refinement cast for them here; above[e] gets the gid of the cluster directly above surface
+ * root e (for e < the scene's surfaces). 1, 0 without clusters, -1 when out of memory. */
+typedef struct hr_cluster_node {
+  uint64_t gid, parent;
+  double xyz[3], rays;
+  int64_t recv;
+  int mine;
+} hr_cluster_node;
+int hr_cluster_graph(const hr_solver *s, hr_cluster_node *out, uint64_t *above);
+/* The rank that holds the links cluster c receives. */
+int hr_cluster_owner(const hr_solver *s, int32_t c);
+/* Graph balancing's new owners of clusters: the entries of a subtree map (gids, ranks; n)
+ * whose gid names a cluster (1 << 63 | c) set c's owner; the others are left to the elements'
+ * map. Then hr_cluster_migrate sends the links. 0 for a gid that names no cluster. */
+int hr_cluster_set_owners(hr_solver *s, const uint64_t *gids, const int32_t *ranks, int64_t n);
+/* This rank's cluster links from a surface to a cluster, as (receiver gid, source gid) pairs
+ * into e (room for hr_cluster_links of them): the ones whose source a receiver's rank must
+ * hold a copy of. Links from clusters need none: the clusters' state is on every rank.
+ * Returns the count. */
+int64_t hr_cluster_elem_sources(const hr_solver *s, uint64_t (*e)[2]);
 size_t hr_cluster_link_bytes(const hr_solver *s); /* what one cluster link takes */
 int64_t hr_cluster_count(const hr_solver *s);
 void hr_cluster_free(hr_clusters **c);

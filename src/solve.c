@@ -274,6 +274,7 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uin
   s->rank = hr_dist_rank(d);
   s->nranks = P;
   s->own_seed = scatter;
+  s->own_given = owner != NULL;
   if (owner) {
     memcpy(s->rootown, owner, (size_t)n * sizeof *owner);
   } else {
@@ -649,11 +650,17 @@ hr_status hr_solver_migrate(hr_solver *s, const uint64_t *gids, const int32_t *r
                             hr_err *err) {
   if (!s->dist) return hr_err_set(err, HR_ERR_INVALID, "hr_solver_migrate: not distributed");
   int bad = n < 0;
+  const uint64_t top = UINT64_C(1) << 63; /* a cluster (cluster.h) */
   for (int64_t i = 0; i < n && !bad; i++) {
+    if (gids[i] & top) {
+      bad = ranks[i] < 0 || ranks[i] >= s->nranks;
+      continue;
+    }
     const uint64_t surf = gids[i] >> HR_GID_PATH_BITS;
     bad = ranks[i] < 0 || ranks[i] >= s->nranks || surf >= (uint64_t)s->scene->nsurfs ||
           (gids[i] & ((UINT64_C(1) << HR_GID_PATH_BITS) - 1)) == 0;
   }
+  bad = bad || !hr_cluster_set_owners(s, gids, ranks, n);
   if (hr_dist_any(s->dist, bad))
     return hr_err_set(err, HR_ERR_INVALID, "hr_solver_migrate: a bad element id or rank");
   uint64_t(*m)[2] = malloc((size_t)(n > 0 ? n : 1) * sizeof *m);
@@ -663,7 +670,10 @@ hr_status hr_solver_migrate(hr_solver *s, const uint64_t *gids, const int32_t *r
     free(m);
     return st;
   }
-  for (int64_t i = 0; i < n; i++) m[i][0] = gids[i], m[i][1] = (uint64_t)ranks[i];
+  int64_t ne = 0; /* the elements' entries */
+  for (int64_t i = 0; i < n; i++)
+    if (!(gids[i] & top)) m[ne][0] = gids[i], m[ne++][1] = (uint64_t)ranks[i];
+  n = ne;
   qsort(m, (size_t)n, sizeof *m, cmp_omap);
   free(s->omap);
   s->omap = m;
@@ -698,7 +708,7 @@ hr_status hr_solver_rank_stats(const hr_solver *s, hr_rank_stats *all, hr_err *e
                 (double)s->nrstart * 16 + (double)s->nsorted * 8 +
                 (double)hr_cluster_links(s) * (double)hr_cluster_link_bytes(s)) / 1e6;
   hr_dist_msg_counters(s->dist, &me.msgs, &me.msg_bytes);
-  me.balancings = s->nbalance, me.migrations = s->nmoved;
+  me.balancings = s->nbalance, me.migrations = s->nmoved, me.cluster_moves = s->ncmoved;
   me.rays = s->rays;
   hr_dist_counters(s->dist, &me.mpi_calls, &me.mpi_bytes, &me.mpi_s);
   me.busy_s = s->t.total - me.mpi_s;

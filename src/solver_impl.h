@@ -150,6 +150,8 @@ struct hr_solver {
    * when own_seed != 0, else the rank of the deepest ancestor listed in omap (sorted gid, rank
    * pairs; hr_solver_migrate), else rootown[surface]. */
   uint64_t own_seed;
+  int own_given;   /* the caller chose the surfaces' ranks (hr_solver_set_dist's 'owner') */
+  int64_t ncmoved; /* clusters given another owner by balancing (hr_cluster_set_owners) */
   int32_t *rootown;
   uint64_t (*omap)[2];
   int64_t nomap;

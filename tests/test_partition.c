@@ -1,7 +1,10 @@
 /* test_partition: the pure partitioners of src/partition against hand-computed and measured
  * numbers: greedy on known weights, ORB on grids (quadrants, weighted shares), METIS on a grid
- * graph (cut near the optimum, balance, determinism), and bad input. */
+ * graph (cut near the optimum, balance, determinism), the tree cut and preorder runs of
+ * clustered runs' graphs (hand-computed pieces, connectivity, weight bounds, parts kept), and
+ * bad input. */
 #include "partition/partition.h"
+#include "xorshift.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -129,10 +132,112 @@ static void test_metis(void) {
   free_grid(&G);
 }
 
+/* Piece checks of hr_partition_tree_cut: every piece connected (one head, whose parent is
+ * outside it or none; everyone else's parent inside), inside one part of 'within', and every
+ * piece not closed at a root or a part's edge weighing at least 'bound'. Returns the count of
+ * heads closed by weight. */
+static int check_pieces(const int32_t *par, const double *w, int n, const int32_t *within,
+                        double bound, const int32_t *cl, int nc, const char *what) {
+  int *heads = calloc((size_t)nc + 1, sizeof *heads), by_weight = 0;
+  double *pw = calloc((size_t)nc + 1, sizeof *pw);
+  for (int v = 0; v < n; v++) {
+    CHECK(cl[v] >= 0 && cl[v] < nc, "%s: node %d in piece %d of %d", what, v, cl[v], nc);
+    if (cl[v] < 0 || cl[v] >= nc) continue;
+    pw[cl[v]] += w[v];
+    if (par[v] < 0 || cl[par[v]] != cl[v]) heads[cl[v]]++;
+    if (within && par[v] >= 0 && within[par[v]] != within[v])
+      CHECK(cl[par[v]] != cl[v], "%s: piece %d crosses parts", what, cl[v]);
+  }
+  for (int c = 0; c < nc; c++) CHECK(heads[c] == 1, "%s: piece %d has %d heads", what, c, heads[c]);
+  for (int v = 0; v < n; v++) {
+    if (cl[v] < 0 || cl[v] >= nc || !(par[v] >= 0 && cl[par[v]] != cl[v])) continue;
+    if (within && within[par[v]] != within[v]) continue;
+    CHECK(pw[cl[v]] >= bound, "%s: piece %d closed at %g < %g", what, cl[v], pw[cl[v]], bound);
+    by_weight++;
+  }
+  free(heads), free(pw);
+  return by_weight;
+}
+
+static void test_tree_cut(void) {
+  /* a path 0 <- 1 <- 2 <- 3 <- 4, unit weights, bound 2: bottom up {3, 4} and {1, 2} close
+   * by weight, {0} at the root; numbered in preorder */
+  const int32_t path[5] = {-1, 0, 1, 2, 3}, want[5] = {0, 1, 1, 2, 2};
+  const double one[5] = {1, 1, 1, 1, 1};
+  int32_t cl[1023];
+  CHECK(hr_partition_tree_cut(path, one, 5, NULL, 2, cl) == 3 && !memcmp(cl, want, sizeof want),
+        "path: pieces %d %d %d %d %d", cl[0], cl[1], cl[2], cl[3], cl[4]);
+  /* a complete binary tree of 1023 nodes, unit weights, bound 32: connected pieces of at
+   * least 32 but the root's, so at most 1023 / 32 of them and the root's */
+  int32_t par[1023], within[1023];
+  double w[1023];
+  for (int v = 0; v < 1023; v++) par[v] = v ? (v - 1) / 2 : -1, w[v] = 1;
+  int nc = hr_partition_tree_cut(par, w, 1023, NULL, 32, cl);
+  int full = check_pieces(par, w, 1023, NULL, 32, cl, nc, "binary tree");
+  CHECK(nc >= 16 && nc <= 1023 / 32 + 1 && full == nc - 1, "binary tree: %d pieces, %d full",
+        nc, full);
+  /* the same tree in two parts by subtree (left and right of the root, root with the left),
+   * and a forest with random parents and weights in 3 random parts */
+  for (int v = 0; v < 1023; v++) {
+    int u = v;
+    while (u > 2) u = (u - 1) / 2;
+    within[v] = u == 2;
+  }
+  nc = hr_partition_tree_cut(par, w, 1023, within, 32, cl);
+  check_pieces(par, w, 1023, within, 32, cl, nc, "binary tree, two parts");
+  CHECK(nc <= 1023 / 32 + 2, "binary tree, two parts: %d pieces", nc);
+  rng_state = 7;
+  for (int v = 0; v < 1023; v++) {
+    par[v] = v < 5 ? -1 : rnd_int(v);
+    w[v] = rnd_in(0, 3);
+    within[v] = rnd_int(3);
+  }
+  nc = hr_partition_tree_cut(par, w, 1023, within, 20, cl);
+  check_pieces(par, w, 1023, within, 20, cl, nc, "random forest, 3 parts");
+  nc = hr_partition_tree_cut(par, w, 1023, NULL, 20, cl);
+  double tot = 0;
+  for (int v = 0; v < 1023; v++) tot += w[v];
+  full = check_pieces(par, w, 1023, NULL, 20, cl, nc, "random forest");
+  CHECK(full <= tot / 20 && nc == full + 5, "random forest: %d pieces, %d full, total %g", nc,
+        full, tot);
+  /* bad input: a cycle, a parent out of range */
+  const int32_t cyc[3] = {1, 0, -1}, far[3] = {-1, 7, 0};
+  CHECK(hr_partition_tree_cut(cyc, one, 3, NULL, 2, cl) == -1, "a cycle was accepted");
+  CHECK(hr_partition_tree_cut(far, one, 3, NULL, 2, cl) == -1, "a parent out of range");
+}
+
+static void test_preorder(void) {
+  /* the path in 2 parts: the middles 0.5 .. 4.5 of 5 split at 2.5 */
+  const int32_t path[5] = {-1, 0, 1, 2, 3}, want[5] = {0, 0, 1, 1, 1};
+  const double one[5] = {1, 1, 1, 1, 1};
+  int32_t part[1023], par[1023];
+  CHECK(hr_partition_preorder(path, one, 5, 2, part) && !memcmp(part, want, sizeof want),
+        "path: parts %d %d %d %d %d", part[0], part[1], part[2], part[3], part[4]);
+  /* the binary tree in 4 parts: nondecreasing along the preorder (a run each), within one
+   * node of equal */
+  double w[1023], W[4] = {0, 0, 0, 0};
+  for (int v = 0; v < 1023; v++) par[v] = v ? (v - 1) / 2 : -1, w[v] = 1;
+  CHECK(hr_partition_preorder(par, w, 1023, 4, part), "binary tree: failed");
+  int32_t stack[64], sp = 0, last = 0;
+  stack[sp++] = 0;
+  while (sp > 0) { /* preorder, left child first */
+    const int32_t v = stack[--sp];
+    CHECK(part[v] >= last, "binary tree: part %d after %d in preorder at %d", part[v], last, v);
+    last = part[v];
+    W[part[v]] += w[v];
+    if (2 * v + 2 < 1023) stack[sp++] = 2 * v + 2, stack[sp++] = 2 * v + 1;
+  }
+  for (int p = 0; p < 4; p++)
+    CHECK(W[p] >= 254 && W[p] <= 257, "binary tree: part %d weighs %g", p, W[p]);
+  CHECK(!hr_partition_preorder(path, one, 5, 0, part), "0 parts accepted");
+}
+
 int main(void) {
   test_greedy();
   test_orb();
   test_metis();
+  test_tree_cut();
+  test_preorder();
   if (fails) printf("%d failures\n", fails);
   else printf("test_partition: all passed\n");
   return fails != 0;

@@ -771,8 +771,9 @@ static void usage(void) {
       "                       (default, N = 1): the best measured balance of work\n"
       "  --balance area       whole surfaces to ranks by area, largest first\n"
       "                       (the answer is the same for every assignment)\n"
-      "  --balance anneal|metis|orb|none  start with whole surfaces by area, then balance the\n"
-      "                       patch/link graph after initial linking and whenever an\n"
+      "  --balance anneal|metis|orb|none  start with whole surfaces by area (clustered runs:\n"
+      "                       compact pieces of the hierarchy), then balance the patch/link\n"
+      "                       graph, clusters included, after initial linking and whenever an\n"
       "                       iteration's idle time passes --balance-idle: simulated\n"
       "                       annealing (the paper's 2.2.5), METIS, or recursive bisection\n"
       "  --balance-alpha A    weight of communication against work in the cost (0.5)\n"
@@ -1878,8 +1879,17 @@ static int is_builtin(const char *name) {
   return 0;
 }
 
+/* ", N clusters' links moved" for a clustered run whose balancing gave clusters new ranks. */
+static const char *cluster_moves_note(int64_t moves) {
+  static char b[64];
+  b[0] = 0;
+  if (moves > 0) snprintf(b, sizeof b, ", %lld clusters' links moved", (long long)moves);
+  return b;
+}
+
 /* The per-rank table of a distributed run (PETSc -log_view style): each rank, then min, mean
  * and max over ranks; imbalance is max over mean of the busy time. */
+
 static void print_ranks(const hr_rank_stats *r, int n) {
   fprintf(stderr, "rank surfaces     links    leaves        rays   busy s    mpi s  mpi calls"
                   "   MB sent   RSS MB\n");
@@ -1922,8 +1932,9 @@ static void print_ranks(const hr_rank_stats *r, int n) {
   fprintf(stderr, "element+link memory: max %.2f MB a rank, %.2f x 1/P of the graph (%.2f MB)\n",
           mem_max, graph > 0 ? mem_max / (graph / n) : 1, graph);
   if (r[0].balancings > 0)
-    fprintf(stderr, "graph balancing: %lld times, %lld of them moved elements\n",
-            (long long)r[0].balancings, (long long)r[0].migrations);
+    fprintf(stderr, "graph balancing: %lld times, %lld of them moved elements%s\n",
+            (long long)r[0].balancings, (long long)r[0].migrations,
+            cluster_moves_note(r[0].cluster_moves));
   /* per phase: busy and MPI (idle included) seconds, min/mean/max over the ranks */
   static const char *const ph[4] = {"init graph", "refine", "gather", "push-pull"};
   fprintf(stderr, "phase         busy min   mean    max    mpi min   mean    max\n");
