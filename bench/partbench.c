@@ -167,9 +167,10 @@ static void tree_graph(const graph *G, hr_graph *t) {
 static int dist_anneal(const graph *G, int P, double alpha, int32_t *part, double *local,
                        double *chain) {
   const hr_graph *g = &G->g;
-  /* the start is given in a run: not timed. With clusters, ORB of all nodes: a spatial start
-   * lets the clustering along the tree (clusters included) make pieces of the scene, where
-   * whole surfaces scattered by area leave at least one piece per surface */
+  /* the start is given in a run: not timed. With clusters, preorder runs of the tree (here by
+   * W; the solver, before any work is known, by the surfaces' area): a compact start lets the
+   * cut along the tree (clusters included) make pieces of the scene, where whole surfaces
+   * scattered by area leave at least one piece per surface */
   int clustered = 0;
   for (int v = 0; v < g->n && !clustered; v++) clustered = is_cluster(G->gid[v]);
   int32_t *par = malloc((size_t)(g->n + 1) * sizeof *par);
