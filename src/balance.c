@@ -685,26 +685,94 @@ static hr_status share_clusters(hr_solver *s, int32_t *ecl) {
 /* The graph of the clusters, assembled on rank 0 from what each rank folds of its own links,
  * tree edges and work (cluster pairs and sums: the graph's edge and node weights as
  * gather_graph's, summed over the clusters) and given to every rank. A collective. */
+/* Up to this many pieces, fold_clusters counts the pairs in a dense triangle (4 bytes a pair:
+ * 32 MB at 4,096) instead of listing every link and sorting the list: at 2 ranks the list of
+ * the conference room's 11 M links a rank took 1.6 s a balancing, most of it fresh pages. */
+#define FOLD_DENSE_MAX 4096
+
+/* Index of pair (a, b), a < b, in the triangle of K pieces. */
+static int64_t tri_at(int64_t a, int64_t b, int64_t K) {
+  return a * (2 * K - a - 1) / 2 + b - a - 1;
+}
+
+/* The pairs of pieces that edges join, summed as the edges come: a dense triangle of counts
+ * where K is small (the weights are 1 and 2, so the counts are the sums exactly), else a list
+ * of the edges that pairs() sorts and merges (csr_build). */
+typedef struct pair_acc {
+  int32_t K;
+  uint32_t *cnt;
+  half_edge *e;
+  int64_t m;
+} pair_acc;
+
+/* Room for up to 'cap' edges; 0 when out of memory. */
+static int acc_init(pair_acc *p, int32_t K, int64_t cap) {
+  memset(p, 0, sizeof *p);
+  p->K = K;
+  if (K <= FOLD_DENSE_MAX) {
+    p->cnt = calloc((size_t)K * (size_t)(K > 0 ? K - 1 : 0) / 2 + 1, sizeof *p->cnt);
+    return p->cnt != NULL;
+  }
+  return (p->e = malloc((size_t)(cap + 1) * sizeof *p->e)) != NULL;
+}
+
+static void acc_add(pair_acc *p, int32_t a, int32_t b, double c) {
+  if (a > b) {
+    const int32_t x = a;
+    a = b, b = x;
+  }
+  if (p->cnt) p->cnt[tri_at(a, b, p->K)] += (uint32_t)c;
+  else p->e[p->m++] = (half_edge){a, b, c};
+}
+
+/* The summed pairs (a < b) in row order, neighbours in index order, as a new array '*out';
+ * returns their count (p is freed), -1 when out of memory. */
+static int64_t acc_pairs(pair_acc *p, half_edge **out) {
+  int64_t np = 0;
+  *out = NULL;
+  if (p->cnt) {
+    const int64_t nt = (int64_t)p->K * (p->K > 0 ? p->K - 1 : 0) / 2;
+    for (int64_t k = 0; k < nt; k++) np += p->cnt[k] != 0;
+    *out = malloc((size_t)(np + 1) * sizeof **out);
+    np = 0;
+    for (int32_t a = 0; *out && a < p->K; a++)
+      for (int32_t b = a + 1; b < p->K; b++) {
+        const uint32_t c = p->cnt[tri_at(a, b, p->K)];
+        if (c) (*out)[np++] = (half_edge){a, b, (double)c};
+      }
+    free(p->cnt);
+    return *out ? np : -1;
+  }
+  half_edge *tmp = malloc((size_t)(p->m + 1) * sizeof *tmp);
+  bgraph lg = {.n = p->K};
+  const int ok = tmp && csr_build(&lg, p->e, tmp, p->m);
+  for (int32_t a = 0; ok && a < p->K; a++)
+    for (int64_t k = lg.xadj[a]; k < lg.xadj[a + 1]; k++)
+      p->e[np++] = (half_edge){a, lg.adj[k], lg.c[k]};
+  free(tmp);
+  bgraph_free(&lg);
+  *out = p->e;
+  if (!ok) free(p->e), *out = NULL;
+  return ok ? np : -1;
+}
+
 static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, const hier *h, int32_t K,
                                const int64_t *recv, bgraph *g) {
   const int64_t ncl = h->H > 0 ? hr_cluster_links(s) : 0;
-  /* one entry a link and a tree edge at most */
-  const int64_t cap = s->nlinks + ncl + s->nel + 1;
-  half_edge *e = malloc((size_t)cap * sizeof *e), *tmp = malloc((size_t)cap * sizeof *tmp);
+  pair_acc acc; /* one edge a link and a tree edge at most */
   double *w = calloc((size_t)K + 1, sizeof *w);
   uint64_t(*pair)[2] = malloc((size_t)(ncl + 1) * sizeof *pair);
-  if (!e || !tmp || !w || !pair) hr_dist_abort(s->dist, 1);
-  int64_t m = 0;
+  if (!acc_init(&acc, K, s->nlinks + ncl + s->nel) || !w || !pair) hr_dist_abort(s->dist, 1);
   for (int64_t k = 0; k < s->nlinks; k++) {
     const int32_t a = ecl[s->links[k].r], b = ecl[s->links[k].s];
-    if (s->links[k].Fu >= 0 && a >= 0 && b >= 0 && a != b) e[m++] = (half_edge){a, b, 1.0};
+    if (s->links[k].Fu >= 0 && a >= 0 && b >= 0 && a != b) acc_add(&acc, a, b, 1.0);
   }
   /* the clusters' links from surfaces (gather_graph's edges), and the clusters' work */
   const int64_t np0 = h->H > 0 ? hr_cluster_elem_sources(s, pair) : 0;
   for (int64_t k = 0; k < np0; k++) {
     const int32_t src = hr_elem_find(s, pair[k][1]);
     const int32_t a = h->ccl[pair[k][0] & ~CLUSTER_BIT], b = src >= 0 ? ecl[src] : -1;
-    if (a >= 0 && b >= 0 && a != b) e[m++] = (half_edge){a, b, 1.0};
+    if (a >= 0 && b >= 0 && a != b) acc_add(&acc, a, b, 1.0);
   }
   free(pair);
   for (int64_t c = 0; c < h->H; c++)
@@ -714,31 +782,23 @@ static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, const hier *h, 
     w[ecl[i]] += held_work(s, i, recv);
     if (!hr_owns(s, i)) continue;
     const int32_t p = s->el[i].parent, b = p >= 0 ? ecl[p] : -1;
-    if (b >= 0 && b != ecl[i]) e[m++] = (half_edge){ecl[i], b, 2.0};
+    if (b >= 0 && b != ecl[i]) acc_add(&acc, ecl[i], b, 2.0);
   }
   /* one record per pair (a < b) and per cluster with work: O(links / P) folded to O(pairs) */
-  for (int64_t k = 0; k < m; k++)
-    if (e[k].a > e[k].b) e[k] = (half_edge){e[k].b, e[k].a, e[k].c};
-  bgraph lg = {.n = K};
-  if (!csr_build(&lg, e, tmp, m)) hr_dist_abort(s->dist, 1);
-  int64_t np = 0, nw = 0;
-  for (int32_t a = 0; a < K; a++) {
-    np += lg.xadj[a + 1] - lg.xadj[a];
-    nw += w[a] > 0;
-  }
+  half_edge *e = NULL, *tmp = NULL;
+  const int64_t np = acc_pairs(&acc, &e);
+  if (np < 0) hr_dist_abort(s->dist, 1);
+  int64_t nw = 0;
+  for (int32_t a = 0; a < K; a++) nw += w[a] > 0;
   work_rec *wr = malloc((size_t)(nw + 1) * sizeof *wr);
   if (!wr) hr_dist_abort(s->dist, 1);
-  m = 0, nw = 0;
-  for (int32_t a = 0; a < K; a++) {
-    for (int64_t k = lg.xadj[a]; k < lg.xadj[a + 1]; k++)
-      e[m++] = (half_edge){a, lg.adj[k], lg.c[k]};
+  nw = 0;
+  for (int32_t a = 0; a < K; a++)
     if (w[a] > 0) wr[nw++] = (work_rec){a, w[a]};
-  }
-  bgraph_free(&lg);
   void *ae = NULL, *aw = NULL;
   int64_t ne = 0, nwall = 0;
   hr_status st = to_rank0(s, e, np, sizeof *e, &ae, &ne);
-  free(e), free(tmp);
+  free(e);
   if (st == HR_OK) st = to_rank0(s, wr, nw, sizeof *wr, &aw, &nwall);
   free(wr);
   memset(g, 0, sizeof *g);
