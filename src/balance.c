@@ -62,6 +62,9 @@ typedef struct gid_cluster {
   int64_t id;
 } gid_cluster;
 
+/* A cluster's gid (cluster.h), as against an element's. */
+static int is_cluster(uint64_t gid) { return (gid & HR_CLUSTER_GID) != 0; }
+
 /* The gathered graph on rank 0 (and, for annealing, on every rank). */
 typedef struct bgraph {
   int32_t n;
@@ -269,7 +272,7 @@ static int build_graph(bgraph *g, node_rec *nodes, int64_t nn, edge_rec *ed, int
   for (int32_t i = 0; ok && i < g->n; i++) {
     const int32_t p = g->pgid[i] ? gid_map_get(&map, g->pgid[i]) : -1;
     /* none for a cluster: its state is on every rank (cluster.h) */
-    if (p < 0 || g->pgid[i] >> 63) continue;
+    if (p < 0 || is_cluster(g->pgid[i])) continue;
     e[m++] = (half_edge){i, p, 2.0};
     e[m++] = (half_edge){p, i, 2.0};
   }
@@ -442,10 +445,6 @@ static int partition(const bgraph *g, int method, int P, int32_t *part) {
                                     : hr_partition_orb(g->xyz, g->w, g->n, P, part);
 }
 
-/* A cluster's gid (cluster.h), as against an element's. */
-static int is_cluster(uint64_t gid) { return (int)(gid >> 63); }
-#define CLUSTER_BIT (UINT64_C(1) << 63)
-
 /* The subtree map of a partition: roots always, other elements where their part differs from
  * their parent's. Returns the count; gids and ranks (n each) filled. */
 static int64_t subtree_map(const bgraph *g, const int32_t *part, uint64_t *gids, int32_t *ranks) {
@@ -551,7 +550,7 @@ static hr_status plan_gathered(hr_solver *s, int method, int64_t *m, uint64_t **
   }
   if (s->rank == 0) {
     for (int32_t i = 0; i < g.n; i++)
-      now[i] = is_cluster(g.gid[i]) ? hr_cluster_owner(s, (int32_t)(g.gid[i] & ~CLUSTER_BIT))
+      now[i] = is_cluster(g.gid[i]) ? hr_cluster_owner(s, (int32_t)(g.gid[i] & ~HR_CLUSTER_GID))
                                     : hr_owner_of(s, g.gid[i]);
     const hr_graph v = view(&g);
     z_now = hr_partition_cost(&v, now, P, s->bal_alpha, NULL, NULL);
@@ -607,11 +606,11 @@ static int local_tree_make(const hr_solver *s, const int64_t *recv, const hr_clu
       const int32_t ep = s->el[e].parent;
       lt->w[i] = own_work(s, e, recv);
       if (ep >= 0) p = lix[ep];
-      else if (K > 0) p = cix[above[e] & ~CLUSTER_BIT];
+      else if (K > 0) p = cix[above[e] & ~HR_CLUSTER_GID];
     } else {
       const hr_cluster_node *c = &cn[lt->elem[i]];
       lt->w[i] = cluster_work(s, c);
-      if (c->parent) p = cix[c->parent & ~CLUSTER_BIT];
+      if (c->parent) p = cix[c->parent & ~HR_CLUSTER_GID];
     }
     lt->par[i] = p;
   }
@@ -682,9 +681,6 @@ static hr_status share_clusters(hr_solver *s, int32_t *ecl) {
   return HR_OK;
 }
 
-/* The graph of the clusters, assembled on rank 0 from what each rank folds of its own links,
- * tree edges and work (cluster pairs and sums: the graph's edge and node weights as
- * gather_graph's, summed over the clusters) and given to every rank. A collective. */
 /* Up to this many pieces, fold_clusters counts the pairs in a dense triangle (4 bytes a pair:
  * 32 MB at 4,096) instead of listing every link and sorting the list: at 2 ranks the list of
  * the conference room's 11 M links a rank took 1.6 s a balancing, most of it fresh pages. */
@@ -697,7 +693,7 @@ static int64_t tri_at(int64_t a, int64_t b, int64_t K) {
 
 /* The pairs of pieces that edges join, summed as the edges come: a dense triangle of counts
  * where K is small (the weights are 1 and 2, so the counts are the sums exactly), else a list
- * of the edges that pairs() sorts and merges (csr_build). */
+ * of the edges that acc_pairs sorts and merges (csr_build). */
 typedef struct pair_acc {
   int32_t K;
   uint32_t *cnt;
@@ -756,6 +752,9 @@ static int64_t acc_pairs(pair_acc *p, half_edge **out) {
   return ok ? np : -1;
 }
 
+/* The graph of the clusters, assembled on rank 0 from what each rank folds of its own links,
+ * tree edges and work (cluster pairs and sums: the graph's edge and node weights as
+ * gather_graph's, summed over the clusters) and given to every rank. A collective. */
 static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, const hier *h, int32_t K,
                                const int64_t *recv, bgraph *g) {
   const int64_t ncl = h->H > 0 ? hr_cluster_links(s) : 0;
@@ -771,7 +770,7 @@ static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, const hier *h, 
   const int64_t np0 = h->H > 0 ? hr_cluster_elem_sources(s, pair) : 0;
   for (int64_t k = 0; k < np0; k++) {
     const int32_t src = hr_elem_find(s, pair[k][1]);
-    const int32_t a = h->ccl[pair[k][0] & ~CLUSTER_BIT], b = src >= 0 ? ecl[src] : -1;
+    const int32_t a = h->ccl[pair[k][0] & ~HR_CLUSTER_GID], b = src >= 0 ? ecl[src] : -1;
     if (a >= 0 && b >= 0 && a != b) acc_add(&acc, a, b, 1.0);
   }
   free(pair);

@@ -425,7 +425,7 @@ static hr_status build_tree(hr_solver *s, hr_clusters *cl) {
 /* ---------------------------------------------------------------- nodes */
 
 static uint64_t node_gid(const hr_solver *s, int32_t id) {
-  return id >= 0 ? s->el[id].gid : (UINT64_C(1) << 63) | (uint64_t)(-1 - id);
+  return id >= 0 ? s->el[id].gid : HR_CLUSTER_GID | (uint64_t)(-1 - id);
 }
 
 static double elem_radius(const hr_solver *s, int32_t e) {
@@ -892,7 +892,7 @@ static int spread_by_hierarchy(hr_solver *s) {
 int hr_cluster_owner(const hr_solver *s, int32_t c) { return node_owner(s, -1 - c); }
 
 int hr_cluster_set_owners(hr_solver *s, const uint64_t *gids, const int32_t *ranks, int64_t n) {
-  const uint64_t top = UINT64_C(1) << 63;
+  const uint64_t top = HR_CLUSTER_GID;
   for (int64_t i = 0; i < n; i++)
     if ((gids[i] & top) && (!s->cl || (gids[i] & ~top) >= (uint64_t)s->cl->n)) return 0;
   for (int64_t i = 0; i < n; i++) {
@@ -925,8 +925,8 @@ static clink link_of(int32_t r, int32_t sn, const float *v) {
  * this rank does not hold is made (a ghost) when 'make' (*st = HR_ERR_NOMEM when it cannot be),
  * else INT32_MIN. */
 static int32_t node_here(hr_solver *s, uint64_t g, int make, hr_status *st) {
-  if (g >> 63) {
-    const uint64_t c = g & ~(UINT64_C(1) << 63);
+  if (g & HR_CLUSTER_GID) {
+    const uint64_t c = g & ~HR_CLUSTER_GID;
     return c < (uint64_t)s->cl->n ? -1 - (int32_t)c : INT32_MIN;
   }
   const int32_t e = make ? hr_elem_ensure(s, g) : hr_elem_find(s, g);

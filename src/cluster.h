@@ -17,6 +17,10 @@
 typedef struct hr_solver hr_solver;
 typedef struct hr_clusters hr_clusters;
 
+/* A cluster's global id is HR_CLUSTER_GID | c (checkpoints, graph balancing's maps and graph
+ * file); an element's never has this bit. */
+#define HR_CLUSTER_GID (UINT64_C(1) << 63)
+
 /* 1 when the solver clusters: --cluster on, or auto with more surface pairs than max_links. */
 int hr_cluster_wanted(const hr_options *o, int nsurfs);
 

@@ -650,7 +650,7 @@ hr_status hr_solver_migrate(hr_solver *s, const uint64_t *gids, const int32_t *r
                             hr_err *err) {
   if (!s->dist) return hr_err_set(err, HR_ERR_INVALID, "hr_solver_migrate: not distributed");
   int bad = n < 0;
-  const uint64_t top = UINT64_C(1) << 63; /* a cluster (cluster.h) */
+  const uint64_t top = HR_CLUSTER_GID;
   for (int64_t i = 0; i < n && !bad; i++) {
     if (gids[i] & top) {
       bad = ranks[i] < 0 || ranks[i] >= s->nranks;

@@ -1889,7 +1889,6 @@ static const char *cluster_moves_note(int64_t moves) {
 
 /* The per-rank table of a distributed run (PETSc -log_view style): each rank, then min, mean
  * and max over ranks; imbalance is max over mean of the busy time. */
-
 static void print_ranks(const hr_rank_stats *r, int n) {
   fprintf(stderr, "rank surfaces     links    leaves        rays   busy s    mpi s  mpi calls"
                   "   MB sent   RSS MB\n");
