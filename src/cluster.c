@@ -732,8 +732,9 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn, double
       if (hr_ff_pair_dark(&gi, &gs[j])) continue;
       const int o = hr_ff_order(&gi, &gs[j]) - 1;
       if (np[o] < 0) np[o] = hr_ff_points(&gi, o + 1, x[o], w[o]);
-      double fij = 0;
-      for (int k = 0; k < np[o]; k++) fij += w[o][k] * hr_ff_point(x[o][k], gi.n, &gs[j]);
+      double fij = 0, fx[9];
+      hr_ff_point_many(x[o], np[o], gi.n, &gs[j], fx);
+      for (int k = 0; k < np[o]; k++) fij += w[o][k] * fx[k];
       fi += fij;
       fs[j >= m0] += fij;
     }

@@ -80,6 +80,129 @@ double hr_ff_point(hr_vec3 x, hr_vec3 nx, const hr_ff_elem *s) {
   return f > 0 ? f : 0;
 }
 
+#if (defined(__x86_64__) || defined(__i386__)) && defined(__GNUC__)
+#define HR_FF_AVX2 1
+#include <immintrin.h>
+
+#define AVX2_ATTR __attribute__((target("avx2")))
+
+/* angle() on four lanes: the same operations, the picks as blends. */
+AVX2_ATTR static inline __m256d angle4(__m256d y, __m256d x) {
+  const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1);
+  const __m256d ax = _mm256_andnot_pd(_mm256_set1_pd(-0.0), x);
+  const __m256d steep = _mm256_cmp_pd(y, ax, _CMP_GT_OQ);
+  const __m256d num = _mm256_blendv_pd(y, ax, steep), den = _mm256_blendv_pd(ax, y, steep);
+  const __m256d ok = _mm256_cmp_pd(den, zero, _CMP_GT_OQ);
+  const __m256d t0 = _mm256_div_pd(num, den);
+  const __m256d t1 = _mm256_div_pd(_mm256_sub_pd(t0, one), _mm256_add_pd(t0, one));
+  const __m256d big = _mm256_cmp_pd(t0, _mm256_set1_pd(0.41421356237309503), _CMP_GT_OQ);
+  const __m256d t = _mm256_blendv_pd(t0, t1, big);
+  const __m256d base = _mm256_blendv_pd(zero, _mm256_set1_pd(0.25 * M_PI), big);
+  const __m256d s = _mm256_mul_pd(t, t);
+  __m256d p = _mm256_set1_pd(-0.060263052365912374);
+  p = _mm256_add_pd(_mm256_set1_pd(0.1056982881025639), _mm256_mul_pd(s, p));
+  p = _mm256_add_pd(_mm256_set1_pd(-0.14239532670272484), _mm256_mul_pd(s, p));
+  p = _mm256_add_pd(_mm256_set1_pd(0.19998183041131562), _mm256_mul_pd(s, p));
+  p = _mm256_add_pd(_mm256_set1_pd(-0.33333306893050196), _mm256_mul_pd(s, p));
+  p = _mm256_add_pd(_mm256_set1_pd(0.9999999993712282), _mm256_mul_pd(s, p));
+  __m256d a = _mm256_add_pd(base, _mm256_mul_pd(t, p));
+  a = _mm256_blendv_pd(a, _mm256_sub_pd(_mm256_set1_pd(0.5 * M_PI), a), steep);
+  a = _mm256_blendv_pd(a, _mm256_sub_pd(_mm256_set1_pd(M_PI), a),
+                       _mm256_cmp_pd(x, zero, _CMP_LT_OQ));
+  return _mm256_and_pd(a, ok);
+}
+
+/* (ax bx + ay by) + az bz, as v3_dot. */
+AVX2_ATTR static inline __m256d dot4(__m256d ax, __m256d ay, __m256d az, __m256d bx, __m256d by,
+                                     __m256d bz) {
+  return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(ax, bx), _mm256_mul_pd(ay, by)),
+                       _mm256_mul_pd(az, bz));
+}
+
+/* hr_ff_point on four lanes where the whole source is in front of the point's tangent plane;
+ * a lane whose source must be clipped there goes to hr_ff_point itself. */
+AVX2_ATTR static void point_many_avx2(const hr_vec3 *x, int n, hr_vec3 nx, const hr_ff_elem *s,
+                                      double *out) {
+  const int nv = s->nv;
+  const __m256d zero = _mm256_setzero_pd();
+  const __m256d nxx = _mm256_set1_pd(nx.x), nxy = _mm256_set1_pd(nx.y), nxz = _mm256_set1_pd(nx.z);
+  for (int b = 0; b < n; b += 4) {
+    const int m = n - b < 4 ? n - b : 4;
+    double xs[3][4];
+    for (int l = 0; l < 4; l++) {
+      const hr_vec3 *p = &x[b + (l < m ? l : 0)];
+      xs[0][l] = p->x, xs[1][l] = p->y, xs[2][l] = p->z;
+    }
+    const __m256d X = _mm256_loadu_pd(xs[0]), Y = _mm256_loadu_pd(xs[1]),
+                  Z = _mm256_loadu_pd(xs[2]);
+    /* in front of the source's plane */
+    const __m256d ox = _mm256_sub_pd(X, _mm256_set1_pd(s->p[0].x)),
+                  oy = _mm256_sub_pd(Y, _mm256_set1_pd(s->p[0].y)),
+                  oz = _mm256_sub_pd(Z, _mm256_set1_pd(s->p[0].z));
+    const __m256d front = _mm256_cmp_pd(dot4(ox, oy, oz, _mm256_set1_pd(s->n.x),
+                                             _mm256_set1_pd(s->n.y), _mm256_set1_pd(s->n.z)),
+                                        zero, _CMP_GT_OQ);
+    __m256d ax[4], ay[4], az[4], all = front, any = zero;
+    for (int k = 0; k < nv; k++) {
+      ax[k] = _mm256_sub_pd(_mm256_set1_pd(s->p[k].x), X);
+      ay[k] = _mm256_sub_pd(_mm256_set1_pd(s->p[k].y), Y);
+      az[k] = _mm256_sub_pd(_mm256_set1_pd(s->p[k].z), Z);
+      const __m256d in = _mm256_cmp_pd(dot4(ax[k], ay[k], az[k], nxx, nxy, nxz), zero, _CMP_GT_OQ);
+      all = _mm256_and_pd(all, in), any = _mm256_or_pd(any, in);
+    }
+    const int mall = _mm256_movemask_pd(all);
+    const int mclip = _mm256_movemask_pd(_mm256_and_pd(front, any)) & ~mall;
+    __m256d f = zero;
+    if (mall) {
+      __m256d sum = zero;
+      for (int k = 0; k < nv; k++) {
+        const int k1 = k + 1 == nv ? 0 : k + 1;
+        const __m256d cx =
+            _mm256_sub_pd(_mm256_mul_pd(ay[k], az[k1]), _mm256_mul_pd(az[k], ay[k1]));
+        const __m256d cy =
+            _mm256_sub_pd(_mm256_mul_pd(az[k], ax[k1]), _mm256_mul_pd(ax[k], az[k1]));
+        const __m256d cz =
+            _mm256_sub_pd(_mm256_mul_pd(ax[k], ay[k1]), _mm256_mul_pd(ay[k], ax[k1]));
+        const __m256d cl = _mm256_sqrt_pd(dot4(cx, cy, cz, cx, cy, cz));
+        const __m256d ang = angle4(cl, dot4(ax[k], ay[k], az[k], ax[k1], ay[k1], az[k1]));
+        const __m256d term =
+            _mm256_div_pd(_mm256_mul_pd(ang, dot4(nxx, nxy, nxz, cx, cy, cz)), cl);
+        sum = _mm256_add_pd(sum, _mm256_and_pd(term, _mm256_cmp_pd(cl, zero, _CMP_GT_OQ)));
+      }
+      f = _mm256_mul_pd(_mm256_xor_pd(sum, _mm256_set1_pd(-0.0)), _mm256_set1_pd(0.5 / M_PI));
+      f = _mm256_and_pd(f, _mm256_and_pd(all, _mm256_cmp_pd(f, zero, _CMP_GT_OQ)));
+    }
+    double fv[4];
+    _mm256_storeu_pd(fv, f);
+    for (int l = 0; l < m; l++)
+      out[b + l] = (mclip >> l & 1) ? hr_ff_point(x[b + l], nx, s) : fv[l];
+  }
+}
+#else
+#define HR_FF_AVX2 0
+#endif
+
+static int g_ff_base; /* hr_ff_use_avx2(0) */
+
+int hr_ff_use_avx2(int allow) {
+  g_ff_base = !allow;
+#if HR_FF_AVX2
+  return allow && __builtin_cpu_supports("avx2");
+#else
+  return 0;
+#endif
+}
+
+void hr_ff_point_many(const hr_vec3 *x, int n, hr_vec3 nx, const hr_ff_elem *s, double *out) {
+#if HR_FF_AVX2
+  if (!g_ff_base && __builtin_cpu_supports("avx2")) {
+    point_many_avx2(x, n, nx, s, out);
+    return;
+  }
+#endif
+  for (int k = 0; k < n; k++) out[k] = hr_ff_point(x[k], nx, s);
+}
+
 /* Gauss-Legendre nodes on [0,1] and weights summing to 1, orders 1..3. */
 static const double GX[3][3] = {{0.5}, {0.21132486540518713, 0.7886751345948129},
                                 {0.1127016653792583, 0.5, 0.8872983346207417}};
@@ -219,9 +342,10 @@ double hr_ff_pair(const hr_ff_elem *r, const hr_ff_elem *s, int order, double *s
   hr_vec3 x[9];
   double w[9];
   int n = hr_ff_points(r, order, x, w);
-  double f = 0, lo = INFINITY, hi = 0;
+  double f = 0, lo = INFINITY, hi = 0, fx[9];
+  hr_ff_point_many(x, n, r->n, s, fx);
   for (int k = 0; k < n; k++) {
-    double fk = hr_ff_point(x[k], r->n, s);
+    const double fk = fx[k];
     f += w[k] * fk;
     lo = fk < lo ? fk : lo;
     hi = fk > hi ? fk : hi;
@@ -299,8 +423,11 @@ double hr_ff_pair_shares(const hr_ff_elem *r, const hr_ff_elem *s, int order, fl
   hr_vec3 x[9];
   double w[9], fc[4] = {0, 0, 0, 0};
   int n = hr_ff_points(r, order, x, w);
-  for (int k = 0; k < n; k++)
-    for (int q = 0; q < 4; q++) fc[q] += w[k] * hr_ff_point(x[k], r->n, &c[q]);
+  for (int q = 0; q < 4; q++) { /* each child's sum in the points' order, as before */
+    double fx[9];
+    hr_ff_point_many(x, n, r->n, &c[q], fx);
+    for (int k = 0; k < n; k++) fc[q] += w[k] * fx[k];
+  }
   double f = fc[0] + fc[1] + fc[2] + fc[3];
   for (int q = 0; q < 4; q++) share[q] = f > 0 ? (float)(fc[q] / f) : -1.0f;
   return f;

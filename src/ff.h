@@ -22,6 +22,15 @@ typedef struct hr_ff_elem {
  * x's tangent plane). 0 when x is not in front of 's'. This function can't fail. */
 double hr_ff_point(hr_vec3 x, hr_vec3 nx, const hr_ff_elem *s);
 
+/* hr_ff_point at the n points x (all with normal nx) into out[0, n), bit for bit: on CPUs with
+ * AVX2 four points at a time, the same operations in the same order (ff.c is built without
+ * contraction into fused multiply-adds). This function can't fail. */
+void hr_ff_point_many(const hr_vec3 *x, int n, hr_vec3 nx, const hr_ff_elem *s, double *out);
+
+/* Whether hr_ff_point_many may take its AVX2 kernel (1, the default, where the CPU has it; 0:
+ * the scalar loop, for tests). Returns whether it now does. */
+int hr_ff_use_avx2(int allow);
+
 /* 1 when the point form factor from 's' is 0 at every point of 'r' (whatever the quadrature):
  * all of 's' lies on or behind r's plane, or all of 'r' on or behind s's. At most 8 dot
  * products: hr_ff_point's own tests, made on the corners (at points computed from corners that

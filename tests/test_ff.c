@@ -10,6 +10,8 @@
 #include "testutil.h"
 #include "vec.h"
 
+#include <string.h>
+
 static double howell_parallel(double a, double b, double c) {
   double X = a / c, Y = b / c;
   return 2 / (M_PI * X * Y) *
@@ -147,6 +149,43 @@ static void kernels(void) {
   CHECK(worst < 5e-3, "pair quadrature off by %.3e", worst);
 }
 
+/* hr_ff_point_many (four points at a time with AVX2 where the CPU has it) against hr_ff_point
+ * point by point, bit for bit: quads and triangles, receivers' quadrature points near the source
+ * (all of it in front of a point's tangent plane, part of it, none; points behind it), and
+ * points in the source's plane. */
+static void point_many(void) {
+  const int avx2 = hr_ff_use_avx2(1);
+  printf("hr_ff_point_many against hr_ff_point (%s)\n", avx2 ? "AVX2 kernel" : "scalar loop");
+  int n = 0, differ = 0, lit = 0, zero = 0;
+  for (int k = 0; k < 6000; k++) {
+    hr_ff_elem s = rnd_elem(v3_scale(rnd_dir(), 0.2 + 2 * rnd()), rnd_dir(), 0.5 + rnd());
+    if (k % 2) { /* a triangle */
+      s.nv = 3;
+      hr_vec3 nn = v3_newell(s.p, 3);
+      s.area = 0.5 * v3_len(nn), s.n = v3_norm(nn);
+    }
+    const hr_ff_elem r = rnd_elem(tv(0, 0, 0), rnd_dir(), 1);
+    hr_vec3 x[12];
+    double w[9], got[12];
+    int m = hr_ff_points(&r, 1 + k % 3, x, w);
+    /* a corner of the source, and a point in its plane: the tests' edge cases */
+    x[m++] = s.p[k % s.nv];
+    x[m++] = v3_add(s.p[0], v3_scale(v3_sub(s.p[1], s.p[0]), 2.5));
+    const int use = 1 + k % m; /* every count, tails of 1-3 lanes included */
+    hr_ff_point_many(x, use, r.n, &s, got);
+    for (int q = 0; q < use; q++, n++) {
+      const double want = hr_ff_point(x[q], r.n, &s);
+      differ += memcmp(&want, &got[q], sizeof want) != 0;
+      lit += want > 0, zero += want == 0;
+    }
+  }
+  printf("  %d points, %d lit, %d dark, %d differ\n", n, lit, zero, differ);
+  CHECK(differ == 0, "%d of %d points differ from hr_ff_point", differ, n);
+  CHECK(lit > n / 5 && zero > n / 10, "%d lit and %d dark of %d points", lit, zero, n);
+  CHECK(hr_ff_use_avx2(0) == 0, "the scalar loop could not be chosen");
+  hr_ff_use_avx2(1);
+}
+
 /* hr_ff_pair_dark: where it says a pair sees nothing, every quadrature point gets exactly 0
  * (random pairs near each other, all orientations; in general position, so no corner lies in
  * the other's plane), and it is not a bound that also takes pairs that exchange light. */
@@ -258,6 +297,7 @@ int main(void) {
     }
   }
   kernels();
+  point_many();
   dark_pairs();
   return t_done("test_ff");
 }
