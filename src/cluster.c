@@ -484,22 +484,30 @@ static int box_behind(const hr_surface *f, hr_vec3 lo, hr_vec3 hi, double tol) {
   return 1;
 }
 
-/* A point of node 'id' drawn by area from the uniforms u[0..2], with its normal. */
-static hr_vec3 node_point(const hr_solver *s, int32_t id, const double u[3], hr_vec3 *n) {
+/* Which surface of cluster id (its place k in perm) takes the point at u0 in [0, 1) of its
+ * area: the last k in [lo, hi) with cum[k] <= t (cum[lo] <= t always), without branches. -1 for
+ * an element. */
+static int32_t node_locate(const hr_solver *s, int32_t id, double u0) {
+  if (id >= 0) return -1;
   const hr_clusters *cl = s->cl;
+  const cnode *nd = &cl->node[-1 - id];
+  const double t = cl->cum[nd->lo] + u0 * (cl->cum[nd->hi] - cl->cum[nd->lo]);
+  int32_t lo = nd->lo, len = nd->hi - nd->lo;
+  while (len > 1) {
+    const int32_t h = len / 2;
+    lo = cl->cum[lo + h] <= t ? lo + h : lo;
+    len -= h;
+  }
+  return lo;
+}
+
+/* The point of node id at u (u[0] chose place k of its surfaces: node_locate) and its normal. */
+static hr_vec3 node_point_at(const hr_solver *s, int32_t id, int32_t k, const double u[3],
+                             hr_vec3 *n) {
   const hr_vec3 *p;
   int nv;
   if (id < 0) {
-    const cnode *nd = &cl->node[-1 - id];
-    const double t = cl->cum[nd->lo] + u[0] * (cl->cum[nd->hi] - cl->cum[nd->lo]);
-    /* the last k in [lo, hi) with cum[k] <= t (cum[lo] <= t always), without branches */
-    int32_t lo = nd->lo, len = nd->hi - nd->lo;
-    while (len > 1) {
-      const int32_t h = len / 2;
-      lo = cl->cum[lo + h] <= t ? lo + h : lo;
-      len -= h;
-    }
-    const csurf *q = &cl->sp[lo];
+    const csurf *q = &s->cl->sp[k];
     p = q->v, nv = q->nv, *n = q->n;
   } else {
     const hr_surface *f = &s->scene->surfs[s->el[id].surf];
@@ -511,6 +519,19 @@ static hr_vec3 node_point(const hr_solver *s, int32_t id, const double u[3], hr_
                   v3_add(v3_scale(p[1], a * (1 - u[2])), v3_scale(p[2], a * u[2])));
   }
   return v3_lerp(v3_lerp(p[0], p[1], u[1]), v3_lerp(p[3], p[2], u[1]), u[2]);
+}
+
+/* A point of node id drawn by area from u in [0, 1)^3 (u[0] picks the surface of a cluster,
+ * u[1], u[2] the point on it), and its normal. */
+static hr_vec3 node_point(const hr_solver *s, int32_t id, const double u[3], hr_vec3 *n) {
+  return node_point_at(s, id, node_locate(s, id, u[0]), u, n);
+}
+
+/* Asks for the surface record of place k (two cache lines) ahead of need. */
+static void prefetch_surface(const hr_solver *s, int32_t k) {
+  if (k < 0) return;
+  __builtin_prefetch(&s->cl->sp[k]);
+  __builtin_prefetch((const char *)&s->cl->sp[k] + 64);
 }
 
 /* A new link r <- sn: nothing estimated or decided yet. */
@@ -543,16 +564,30 @@ static int link_rays(const hr_solver *s) {
  * hr_vf_pair: where the facing parts are small, k draws often found none, and such links
  * carried nothing although exact quadrature gave them light: museum 1.5% dark). Returns how
  * many face each other, and in *ndraw how many were drawn. */
+#define DRAW_BATCH 8
 static int draw(const hr_solver *s, int32_t r, int32_t sn, int k, int stream, double reg,
                 double *w, float *org, float *dst, int *ndraw) {
   const uint64_t key = hr_hash4(s->opt.seed, node_gid(s, r), node_gid(s, sn), 11 + stream);
   const double lift = s->vf.lift;
   int m = 0, q = 0;
-  for (; q < 8 * k && m < k; q++) {
-    double u[6];
-    six_units(key, (uint64_t)q, u);
+  /* in batches: the surfaces of a batch's draws are found first, and their records asked for,
+   * so that the searches and the records' cache misses overlap (the same draws in the same
+   * order; a batch's draws after the k-th facing pair are found and not used) */
+  double u[DRAW_BATCH][6];
+  int32_t kr[DRAW_BATCH], ks[DRAW_BATCH];
+  for (int b = DRAW_BATCH; q < 8 * k && m < k; q++, b++) {
+    if (b == DRAW_BATCH) {
+      const int nb = 8 * k - q < DRAW_BATCH ? 8 * k - q : DRAW_BATCH;
+      for (b = 0; b < nb; b++) {
+        six_units(key, (uint64_t)(q + b), u[b]);
+        kr[b] = node_locate(s, r, u[b][0]), ks[b] = node_locate(s, sn, u[b][3]);
+        prefetch_surface(s, kr[b]), prefetch_surface(s, ks[b]);
+      }
+      b = 0;
+    }
     hr_vec3 nx, ny;
-    const hr_vec3 x = node_point(s, r, u, &nx), y = node_point(s, sn, u + 3, &ny);
+    const hr_vec3 x = node_point_at(s, r, kr[b], u[b], &nx),
+                  y = node_point_at(s, sn, ks[b], u[b] + 3, &ny);
     const hr_vec3 dv = v3_sub(y, x);
     const double r2 = v3_dot(dv, dv);
     if (!(r2 > 0)) continue;
