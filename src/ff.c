@@ -119,12 +119,29 @@ AVX2_ATTR static inline __m256d dot4(__m256d ax, __m256d ay, __m256d az, __m256d
                        _mm256_mul_pd(az, bz));
 }
 
-/* hr_ff_point on four lanes where the whole source is in front of the point's tangent plane;
- * a lane whose source must be clipped there goes to hr_ff_point itself. */
+/* One edge (u, v) of Lambert's sum on four lanes: angle(|u x v|, u . v) nx . (u x v) / |u x v|,
+ * and +0 where |u x v| is 0 (hr_ff_point skips the edge: adding +0 to its sum, which is never
+ * -0, changes nothing). */
+AVX2_ATTR static inline __m256d edge4(__m256d ux, __m256d uy, __m256d uz, __m256d vx, __m256d vy,
+                                      __m256d vz, __m256d nxx, __m256d nxy, __m256d nxz) {
+  const __m256d cx = _mm256_sub_pd(_mm256_mul_pd(uy, vz), _mm256_mul_pd(uz, vy));
+  const __m256d cy = _mm256_sub_pd(_mm256_mul_pd(uz, vx), _mm256_mul_pd(ux, vz));
+  const __m256d cz = _mm256_sub_pd(_mm256_mul_pd(ux, vy), _mm256_mul_pd(uy, vx));
+  const __m256d cl = _mm256_sqrt_pd(dot4(cx, cy, cz, cx, cy, cz));
+  const __m256d ang = angle4(cl, dot4(ux, uy, uz, vx, vy, vz));
+  const __m256d term = _mm256_div_pd(_mm256_mul_pd(ang, dot4(nxx, nxy, nxz, cx, cy, cz)), cl);
+  return _mm256_and_pd(term, _mm256_cmp_pd(cl, _mm256_setzero_pd(), _CMP_GT_OQ));
+}
+
+/* hr_ff_point on four lanes. Where the source straddles a point's tangent plane, the clipped
+ * polygon's edges in hr_ff_point's order: for each corner k, (a_k, its successor) if a_k is in
+ * front, then (I_k, its successor) if edge k crosses the plane at I_k; a corner's successor is
+ * I_k where edge k leaves, else a_k+1; an exit's is the entry point. A lane whose polygon crosses
+ * the plane other than twice (rounding, near-degenerate corners) goes to hr_ff_point itself. */
 AVX2_ATTR static void point_many_avx2(const hr_vec3 *x, int n, hr_vec3 nx, const hr_ff_elem *s,
                                       double *out) {
   const int nv = s->nv;
-  const __m256d zero = _mm256_setzero_pd();
+  const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1);
   const __m256d nxx = _mm256_set1_pd(nx.x), nxy = _mm256_set1_pd(nx.y), nxz = _mm256_set1_pd(nx.z);
   for (int b = 0; b < n; b += 4) {
     const int m = n - b < 4 ? n - b : 4;
@@ -142,40 +159,62 @@ AVX2_ATTR static void point_many_avx2(const hr_vec3 *x, int n, hr_vec3 nx, const
     const __m256d front = _mm256_cmp_pd(dot4(ox, oy, oz, _mm256_set1_pd(s->n.x),
                                              _mm256_set1_pd(s->n.y), _mm256_set1_pd(s->n.z)),
                                         zero, _CMP_GT_OQ);
-    __m256d ax[4], ay[4], az[4], all = front, any = zero;
+    __m256d ax[4], ay[4], az[4], d[4], in[4], all = front, any = zero;
     for (int k = 0; k < nv; k++) {
       ax[k] = _mm256_sub_pd(_mm256_set1_pd(s->p[k].x), X);
       ay[k] = _mm256_sub_pd(_mm256_set1_pd(s->p[k].y), Y);
       az[k] = _mm256_sub_pd(_mm256_set1_pd(s->p[k].z), Z);
-      const __m256d in = _mm256_cmp_pd(dot4(ax[k], ay[k], az[k], nxx, nxy, nxz), zero, _CMP_GT_OQ);
-      all = _mm256_and_pd(all, in), any = _mm256_or_pd(any, in);
+      d[k] = dot4(ax[k], ay[k], az[k], nxx, nxy, nxz);
+      in[k] = _mm256_cmp_pd(d[k], zero, _CMP_GT_OQ);
+      all = _mm256_and_pd(all, in[k]), any = _mm256_or_pd(any, in[k]);
     }
-    const int mall = _mm256_movemask_pd(all);
-    const int mclip = _mm256_movemask_pd(_mm256_and_pd(front, any)) & ~mall;
-    __m256d f = zero;
-    if (mall) {
-      __m256d sum = zero;
+    const __m256d lit = _mm256_and_pd(front, any); /* lanes with something in front */
+    const int mall = _mm256_movemask_pd(all), mlit = _mm256_movemask_pd(lit);
+    int mscalar = 0;
+    __m256d sum = zero;
+    if (mlit & ~mall) { /* some lane's source is clipped */
+      __m256d ix[4], iy[4], iz[4], cross[4], ncross = zero, ex = zero, ey = zero, ez = zero;
       for (int k = 0; k < nv; k++) {
         const int k1 = k + 1 == nv ? 0 : k + 1;
-        const __m256d cx =
-            _mm256_sub_pd(_mm256_mul_pd(ay[k], az[k1]), _mm256_mul_pd(az[k], ay[k1]));
-        const __m256d cy =
-            _mm256_sub_pd(_mm256_mul_pd(az[k], ax[k1]), _mm256_mul_pd(ax[k], az[k1]));
-        const __m256d cz =
-            _mm256_sub_pd(_mm256_mul_pd(ax[k], ay[k1]), _mm256_mul_pd(ay[k], ax[k1]));
-        const __m256d cl = _mm256_sqrt_pd(dot4(cx, cy, cz, cx, cy, cz));
-        const __m256d ang = angle4(cl, dot4(ax[k], ay[k], az[k], ax[k1], ay[k1], az[k1]));
-        const __m256d term =
-            _mm256_div_pd(_mm256_mul_pd(ang, dot4(nxx, nxy, nxz, cx, cy, cz)), cl);
-        sum = _mm256_add_pd(sum, _mm256_and_pd(term, _mm256_cmp_pd(cl, zero, _CMP_GT_OQ)));
+        cross[k] = _mm256_xor_pd(in[k], in[k1]);
+        ncross = _mm256_add_pd(ncross, _mm256_and_pd(cross[k], one));
+        const __m256d t = _mm256_div_pd(d[k], _mm256_sub_pd(d[k], d[k1]));
+        ix[k] = _mm256_add_pd(ax[k], _mm256_mul_pd(_mm256_sub_pd(ax[k1], ax[k]), t));
+        iy[k] = _mm256_add_pd(ay[k], _mm256_mul_pd(_mm256_sub_pd(ay[k1], ay[k]), t));
+        iz[k] = _mm256_add_pd(az[k], _mm256_mul_pd(_mm256_sub_pd(az[k1], az[k]), t));
+        const __m256d entry = _mm256_andnot_pd(in[k], cross[k]);
+        ex = _mm256_blendv_pd(ex, ix[k], entry), ey = _mm256_blendv_pd(ey, iy[k], entry);
+        ez = _mm256_blendv_pd(ez, iz[k], entry);
       }
-      f = _mm256_mul_pd(_mm256_xor_pd(sum, _mm256_set1_pd(-0.0)), _mm256_set1_pd(0.5 / M_PI));
-      f = _mm256_and_pd(f, _mm256_and_pd(all, _mm256_cmp_pd(f, zero, _CMP_GT_OQ)));
+      mscalar = mlit & ~mall &
+                ~_mm256_movemask_pd(_mm256_cmp_pd(ncross, _mm256_set1_pd(2), _CMP_EQ_OQ));
+      for (int k = 0; k < nv; k++) {
+        const int k1 = k + 1 == nv ? 0 : k + 1;
+        /* (a_k, I_k where the edge crosses, else a_k1) where a_k is in front */
+        __m256d vx = _mm256_blendv_pd(ax[k1], ix[k], cross[k]),
+                vy = _mm256_blendv_pd(ay[k1], iy[k], cross[k]),
+                vz = _mm256_blendv_pd(az[k1], iz[k], cross[k]);
+        sum = _mm256_add_pd(sum, _mm256_and_pd(in[k], edge4(ax[k], ay[k], az[k], vx, vy, vz, nxx,
+                                                            nxy, nxz)));
+        /* (I_k, the entry where a_k is in front, else a_k1) where the edge crosses */
+        vx = _mm256_blendv_pd(ax[k1], ex, in[k]), vy = _mm256_blendv_pd(ay[k1], ey, in[k]);
+        vz = _mm256_blendv_pd(az[k1], ez, in[k]);
+        sum = _mm256_add_pd(sum, _mm256_and_pd(cross[k], edge4(ix[k], iy[k], iz[k], vx, vy, vz,
+                                                               nxx, nxy, nxz)));
+      }
+    } else if (mall) {
+      for (int k = 0; k < nv; k++) {
+        const int k1 = k + 1 == nv ? 0 : k + 1;
+        sum = _mm256_add_pd(
+            sum, edge4(ax[k], ay[k], az[k], ax[k1], ay[k1], az[k1], nxx, nxy, nxz));
+      }
     }
+    __m256d f = _mm256_mul_pd(_mm256_xor_pd(sum, _mm256_set1_pd(-0.0)), _mm256_set1_pd(0.5 / M_PI));
+    f = _mm256_and_pd(f, _mm256_and_pd(lit, _mm256_cmp_pd(f, zero, _CMP_GT_OQ)));
     double fv[4];
     _mm256_storeu_pd(fv, f);
     for (int l = 0; l < m; l++)
-      out[b + l] = (mclip >> l & 1) ? hr_ff_point(x[b + l], nx, s) : fv[l];
+      out[b + l] = (mscalar >> l & 1) ? hr_ff_point(x[b + l], nx, s) : fv[l];
   }
 }
 #else
