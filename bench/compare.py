@@ -1,8 +1,9 @@
 #!/usr/bin/env python3
-"""compare.py [options] REF.csv SURFACES.csv: the error of a solution (hrad's surfaces.csv) against a
-path-traced reference (bench/ptref, or the verify.csv of `hrad --verify`): per-polygon relative
-error |B - R| / |R| over RGB, its area-weighted RMS over non-emitting polygons with a non-zero
-reference, the worst polygon, and the reference's own noise (area-weighted RMS of |se| / |R|).
+"""compare.py [options] REF.csv SURFACES.csv: the error of a solution (hrad's surfaces.csv)
+against a path-traced reference (bench/ptref, or the verify.csv of `hrad --verify`): per-polygon
+relative error |B - R| / |R| over RGB, its area-weighted RMS over non-emitting polygons with a
+non-zero reference, the worst polygon, and the reference's own noise (area-weighted RMS of
+|se| / |R|).
 Prints one line:
   rms WORST_ID worst noise  (as percentages)
 Numbers may be decimal or C99 hexadecimal floats (surfaces.csv under HRAD_TEST_EXACT=1).
@@ -75,7 +76,8 @@ def main():
             m[2] += a * sgn / sum(R) if sum(R) > 0 else 0
             m[3] += 1
         if verbose:
-            print(f"{pid:5d} area {a:9.4g}  err {100*e:7.3f}% {'+' if sgn > 0 else '-'}  noise {100*n:6.3f}%")
+            sign = '+' if sgn > 0 else '-'
+            print(f"{pid:5d} area {a:9.4g}  err {100*e:7.3f}% {sign}  noise {100*n:6.3f}%")
     if sw <= 0:
         sys.exit("compare.py: no polygon to compare")
     rms, noise = math.sqrt(se2 / sw), math.sqrt(sn2 / sw)

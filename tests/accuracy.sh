@@ -35,6 +35,53 @@ verify() {
 }
 
 verify cornell cornell
+
+# ---------------------------------------------------------------- bench/compare.py
+# The benchmarks' error measure (bench/compare.py) against hrad's own summary line on the same
+# verify.csv: the same RMS, worst polygon and noise; with --max-noise 1 (every polygon) the same
+# four fields and sqrt(rms^2 - noise^2); with --by-material one row per material whose polygon
+# counts add up to the polygons compared and whose shares add up to 100%.
+compare_check() {
+  local cmp="$src/bench/compare.py" v="$t/cornell/verify.csv" f="$t/cornell/surfaces.csv"
+  if ! command -v python3 > /dev/null; then
+    skip "bench/compare.py: python3 not installed"
+    return
+  fi
+  if [ ! -s "$v" ]; then
+    bad "bench/compare.py: no verify.csv from the Cornell box run"
+    return
+  fi
+  local line a b m
+  line=$(grep '^verify: area-weighted RMS error' "$t/cornell.err")
+  a=$(python3 "$cmp" "$v" "$f")
+  b=$(python3 "$cmp" --max-noise 1 "$v" "$f")
+  m=$(python3 "$cmp" --max-noise 1 --by-material "$v" "$f" | tail -n +2)
+  if awk -v line="$line" -v a="$a" -v b="$b" -v m="$m" 'BEGIN {
+      match(line, /RMS error [0-9.]+/); rms = substr(line, RSTART + 10, RLENGTH - 10) + 0
+      match(line, /over [0-9]+/); n = substr(line, RSTART + 5, RLENGTH - 5) + 0
+      match(line, /worst [0-9.]+/); worst = substr(line, RSTART + 6, RLENGTH - 6) + 0
+      match(line, /noise [0-9.]+/); noise = substr(line, RSTART + 6, RLENGTH - 6) + 0
+      split(a, x, " "); split(b, y, " ")
+      d = x[1] * x[1] - x[4] * x[4]; q = d > 0 ? sqrt(d) : 0
+      k = split(m, rows, "\n"); cnt = 0; share = 0
+      for (i = 1; i <= k; i++) {
+        split(rows[i], f, " ")
+        for (j = 1; j <= length(f); j++) {
+          if (f[j] == "share") { v = f[j + 1]; sub(/%/, "", v); share += v }
+          if (f[j] == "n") cnt += f[j + 1]
+        }
+      }
+      ok = (x[1] - rms)^2 < 1e-4 && (x[3] - worst)^2 < 1e-4 && (x[4] - noise)^2 < 1e-4
+      ok = ok && a == y[1] " " y[2] " " y[3] " " y[4] && (y[5] - q)^2 < 1e-5
+      ok = ok && cnt == n && (share - 100)^2 < 0.01
+      exit !ok }'; then
+    ok "bench/compare.py agrees with hrad --verify: $a; by material: $(wc -l <<< "$m") rows"
+  else
+    bad "bench/compare.py: '$a' / '$b' against '$line'; by material:
+$m"
+  fi
+}
+compare_check
 cb="$src/tests/data/cornell/CornellBox-Original.obj" # vendored: CC BY 3.0, see its LICENSE.txt
 if [ -f "$cb" ]; then
   verify "$cb" mcguire
