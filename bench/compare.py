@@ -18,7 +18,7 @@ Options:
   --by-material    after the line, one per material (reference files with a 'material' column):
                    area, share of the summed squared error, RMS error (noise removed), mean
                    signed error (area-weighted, + too bright), polygons; largest share first."""
-import csv, math, sys
+import argparse, csv, math, sys
 
 
 def num(t):
@@ -26,25 +26,16 @@ def num(t):
 
 
 def main():
-    argv = sys.argv[1:]
-    verbose = '-v' in argv
-    by_mat = '--by-material' in argv
-    max_noise = None
-    args = []
-    i = 0
-    while i < len(argv):
-        a = argv[i]
-        if a == '--max-noise':
-            max_noise = float(argv[i + 1])
-            i += 2
-            continue
-        if not a.startswith('-'):
-            args.append(a)
-        i += 1
-    if len(args) != 2:
-        sys.exit(__doc__)
-    ref = {int(r['id']): r for r in csv.DictReader(open(args[0]))}
-    sol = {int(r['id']): r for r in csv.DictReader(open(args[1]))}
+    ap = argparse.ArgumentParser(usage=__doc__.split(':')[0])
+    ap.add_argument('ref')
+    ap.add_argument('surfaces')
+    ap.add_argument('-v', action='store_true', dest='verbose')
+    ap.add_argument('--max-noise', type=float)
+    ap.add_argument('--by-material', action='store_true')
+    opt = ap.parse_args()
+    verbose, by_mat, max_noise = opt.verbose, opt.by_material, opt.max_noise
+    ref = {int(r['id']): r for r in csv.DictReader(open(opt.ref))}
+    sol = {int(r['id']): r for r in csv.DictReader(open(opt.surfaces))}
     sw = se2 = sn2 = 0.0
     worst, wid = 0.0, -1
     mats = {}
@@ -69,12 +60,13 @@ def main():
             worst, wid = e, pid
         sgn = sum(b - x for b, x in zip(B, R))
         if by_mat:
-            m = mats.setdefault(r.get('material', '?'), [0.0, 0.0, 0.0, 0, 0.0])
-            m[0] += a
-            m[1] += a * e * e
-            m[4] += a * n * n
-            m[2] += a * sgn / sum(R) if sum(R) > 0 else 0
-            m[3] += 1
+            m = mats.setdefault(r.get('material', '?'),
+                                {'area': 0.0, 'e2': 0.0, 'n2': 0.0, 'signed': 0.0, 'n': 0})
+            m['area'] += a
+            m['e2'] += a * e * e
+            m['n2'] += a * n * n
+            m['signed'] += a * sgn / sum(R)
+            m['n'] += 1
         if verbose:
             sign = '+' if sgn > 0 else '-'
             print(f"{pid:5d} area {a:9.4g}  err {100*e:7.3f}% {sign}  noise {100*n:6.3f}%")
@@ -86,12 +78,12 @@ def main():
         line += f" {100*math.sqrt(max(0.0, rms * rms - noise * noise)):.3f} {sw:.6g}"
     print(line)
     if by_mat:
-        tot = sum(m[1] for m in mats.values())
-        for name, m in sorted(mats.items(), key=lambda kv: -kv[1][1]):
-            share = 100 * m[1] / tot if tot > 0 else 0
-            print(f"{name:20s} area {m[0]:9.4g}  share {share:6.2f}%  "
-                  f"rms {100*math.sqrt(max(0.0, m[1] - m[4]) / m[0]):7.3f}%  "
-                  f"signed {100*m[2]/m[0]:+7.3f}%  n {m[3]}")
+        tot = sum(m['e2'] for m in mats.values())
+        for name, m in sorted(mats.items(), key=lambda kv: -kv[1]['e2']):
+            share = 100 * m['e2'] / tot if tot > 0 else 0
+            print(f"{name:20s} area {m['area']:9.4g}  share {share:6.2f}%  "
+                  f"rms {100*math.sqrt(max(0.0, m['e2'] - m['n2']) / m['area']):7.3f}%  "
+                  f"signed {100*m['signed']/m['area']:+7.3f}%  n {m['n']}")
 
 
 main()
