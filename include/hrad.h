@@ -259,6 +259,8 @@ typedef struct hr_options {
   double max_links;   /* more surface pairs than this: clustered under HR_CLUSTER_AUTO, refused
                          under HR_CLUSTER_OFF (0 = no limit) */
   int cluster;        /* HR_CLUSTER_AUTO, _ON or _OFF: hierarchical clustering (issue 12) */
+  int extrapolate;    /* Aitken extrapolation of the leaves' radiosity every few iterations
+                         without new links (docs/design.md, "Extrapolation"); default on */
 } hr_options;
 
 enum { HR_CLUSTER_AUTO = 0, HR_CLUSTER_ON = 1, HR_CLUSTER_OFF = 2 };

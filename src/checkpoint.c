@@ -5,11 +5,11 @@
  * where anything sits in memory: not on the thread count, and later not on how elements are
  * spread over processes. Element geometry is not stored (it follows from the gid); the per-element
  * state the next iteration reads is (B, what it sends, the oracle's reference and spread, the
- * open fraction). Because the solver's sums run in gid order (hr_link_sort, gather), a resumed
+ * open fraction, the extrapolation's samples). Because the solver's sums run in gid order (hr_link_sort, gather), a resumed
  * run ends bit-identical to an uninterrupted one.
  *
  * Layout (little-endian): "HRADCKP1", u32 version, u64 scene hash, u64 options hash, the progress
- * of Figure 3, the elements, the links with their candidate lists, and a u64 checksum of all that
+ * of Figure 3 (with the extrapolation window), the elements, the links with their candidate lists, and a u64 checksum of all that
  * precedes it. A file is written to PATH.tmp and renamed into place, so a kill leaves the
  * previous checkpoint intact. */
 #include "cluster.h"
@@ -23,7 +23,7 @@
 #include <string.h>
 
 #define MAGIC "HRADCKP1"
-#define VERSION 6u
+#define VERSION 7u
 
 /* ---------------------------------------------------------------- hashing */
 
@@ -57,7 +57,7 @@ static uint64_t scene_hash(const hr_scene *sc) {
  * through whether the solver clusters). */
 static uint64_t options_hash(const hr_options *o, int nsurfs) {
   const double d[] = {o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max};
-  const int64_t n[] = {o->relax, o->relax_links, o->rays, (int64_t)o->seed,
+  const int64_t n[] = {o->relax, o->relax_links, o->rays, (int64_t)o->seed, o->extrapolate,
                        hr_cluster_wanted(o, nsurfs)};
   return hash_bytes(hash_bytes(0x0b7, d, sizeof d), n, sizeof n);
 }
@@ -78,7 +78,7 @@ static void put(writer *w, const void *p, size_t n) {
 
 /* The progress of Figure 3. */
 typedef struct progress {
-  int32_t iterations, converged, done, stopped, lazy, pad;
+  int32_t iterations, converged, done, stopped, lazy, xwin, xlast, pad;
   double bf_e, unit, prev_change, prev_abs;
   int64_t stall, rays, initial_links;
   hr_timing t;
@@ -87,6 +87,7 @@ typedef struct progress {
 /* Per element, after its gid. */
 typedef struct elem_rec {
   double B[3], Bs[3], bref, bvar, open;
+  double hist[2][3]; /* the extrapolation window's samples */
 } elem_rec;
 
 /* Per link, before its candidate ids. */
@@ -181,6 +182,7 @@ static int pack_elements(const hr_solver *s, char **out, int64_t *bytes) {
     memcpy(r->r.B, s->B[e], sizeof r->r.B);
     memcpy(r->r.Bs, s->Bs[e], sizeof r->r.Bs);
     r->r.bref = s->bref[e], r->r.bvar = s->bvar[e], r->r.open = s->open[e];
+    memcpy(r->r.hist, s->hist[e], sizeof r->r.hist);
   }
   *out = (char *)g;
   *bytes = n * (int64_t)sizeof *g;
@@ -255,7 +257,8 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
   /* counts over all ranks */
   const int64_t rays = s->dist ? s->g_rays : s->rays;
   const int64_t init = s->dist ? s->g_initial : s->initial_links;
-  progress pr = {s->iterations, s->converged, s->done,  s->stopped, s->lazy, 0,
+  progress pr = {s->iterations, s->converged, s->done,        s->stopped,
+                 s->lazy,       s->xwin,      s->xlast,       0,
                  s->bf_e,       s->unit,      s->prev_change, s->prev_abs,
                  s->stall,      rays,         init,           s->t};
   put(&w, &pr, sizeof pr);
@@ -396,6 +399,7 @@ static int read_elements(hr_solver *s, reader *r, const char *path, hr_err *err)
     memcpy(s->B[e], er.B, sizeof er.B);
     memcpy(s->Bs[e], er.Bs, sizeof er.Bs);
     s->bref[e] = er.bref, s->bvar[e] = er.bvar, s->open[e] = er.open;
+    memcpy(s->hist[e], er.hist, sizeof er.hist);
   }
   if (r->bad || s->nel != n) {
     hr_err_set(err, HR_ERR_PARSE, "%s: damaged checkpoint (elements)", path);
@@ -552,6 +556,7 @@ static hr_status resume(hr_solver *s, const char *path, hr_err *err) {
   if (st != HR_OK) return st;
   s->iterations = pr.iterations, s->converged = pr.converged, s->done = pr.done;
   s->stopped = pr.stopped, s->lazy = pr.lazy, s->bf_e = pr.bf_e, s->unit = pr.unit;
+  s->xwin = pr.xwin, s->xlast = pr.xlast;
   s->rays = pr.rays;
   s->prev_change = pr.prev_change, s->prev_abs = pr.prev_abs, s->stall = pr.stall;
   s->initial_links = pr.initial_links, s->t = pr.t;

@@ -138,6 +138,9 @@ static int reserve(hr_solver *s, int64_t need) {
   double *br = realloc(s->bref, (size_t)nc * sizeof *br);
   if (!br) return 0;
   s->bref = br;
+  double(*hi)[2][3] = realloc(s->hist, (size_t)nc * sizeof *hi);
+  if (!hi) return 0;
+  s->hist = hi;
   double *bv = realloc(s->bvar, (size_t)nc * sizeof *bv);
   if (!bv) return 0;
   s->bvar = bv;
@@ -191,6 +194,7 @@ hr_status hr_elem_init(hr_solver *s) {
     s->Gu[i] = s->Gf[i] = s->Gv[i] = 0;
     s->erays[i] = 0;
     s->bvar[i] = 0;
+    memset(s->hist[i], 0, sizeof s->hist[i]);
     s->open[i] = 1; /* hr_elem_open, once the ray caster exists */
   }
   s->nel = sc->nsurfs;
@@ -261,6 +265,7 @@ hr_status hr_elem_subdivide(hr_solver *s, int32_t idx) {
     s->rho_max[first + k] = s->rho_max[idx];
     s->bref[first + k] = s->bref[idx];
     s->bvar[first + k] = 0;
+    memset(s->hist[first + k], 0, sizeof s->hist[first + k]); /* new links: a new window */
     s->open[first + k] = s->open[idx]; /* hr_elem_open, after the round's subdivisions */
     s->eown[first + k] = hr_owner_of(s, e->gid);
     s->esub[first + k] = 0;
@@ -328,6 +333,7 @@ void hr_elem_compact(hr_solver *s, const uint8_t *keep) {
     s->Gu[d] = s->Gu[e], s->Gf[d] = s->Gf[e], s->Gv[d] = s->Gv[e], s->rho_max[d] = s->rho_max[e];
     s->bref[d] = s->bref[e], s->open[d] = s->open[e], s->bvar[d] = s->bvar[e];
     s->erays[d] = s->erays[e];
+    memcpy(s->hist[d], s->hist[e], sizeof s->hist[d]);
     s->eown[d] = s->eown[e], s->esub[d] = s->esub[e];
   }
   for (int64_t i = 0; i < s->nlinks; i++) {

@@ -206,15 +206,28 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
  * the larger at least HR_VF_LAND_MIN), and j is larger than A_e / 16 and than an eighth of the
  * part of it the receiver sees. The links into a split leaf then refine to its children as any
  * links do (hr_elem_splittable). */
+static double longest_side(const hr_elem *e) {
+  double m = 0; /* a triangle's p[3] is its p[2]: its fourth side is its third */
+  for (int k = 0; k < 4; k++) m = fmax(m, v3_len(v3_sub(e->p[(k + 1) & 3], e->p[k])));
+  return m;
+}
+
 static int fine_source(const hr_solver *s, const hr_link *l, int32_t j) {
   const hr_elem *r = &s->el[l->r], *e = &s->el[j];
-  if (r->parent >= 0 || r->area > s->area_min || e->area <= s->area_min / 16 ||
+  if (r->parent >= 0 || r->area > s->area_min || e->area <= s->area_min / 1024 ||
       e->depth >= HR_GID_DEPTH)
     return 0;
   /* the part of the source the receiver sees, about its size plus twice its distance squared:
-   * the source splits while it is larger than an eighth of that */
+   * the source splits while it is larger than an eighth of that. A sliver that touches the
+   * source (closer to its plane than its width w, the area over its longest side) sees a strip
+   * about as wide as itself, not as its square root: its size is scaled by q = 2 w / sqrt(A),
+   * and the source may split to A_e / 16 times q^2, to A_e / 1024 at most (docs/design.md,
+   * "Fine sources"). */
   const double d = fabs(v3_dot(v3_sub(r->c, e->p[0]), s->scene->surfs[e->surf].normal));
-  const double fp = sqrt(r->area) + 2 * d;
+  const double w = r->area / longest_side(r), wr = sqrt(r->area);
+  const double q = d < w ? fmin(1, 2 * w / wr) : 1;
+  if (e->area <= s->area_min / 16 * fmax(q * q, 1.0 / 64)) return 0;
+  const double fp = q * wr + 2 * d;
   if (e->area <= 0.125 * fp * fp) return 0;
   const double as = s->el[l->s].area;
   return l->Fu * r->area / (r->area < as ? r->area : as) >= HR_VF_LAND_MIN;
@@ -944,6 +957,7 @@ static hr_status route_links(hr_solver *s, hr_link **pcur, int64_t *pn, hr_statu
 typedef struct msg_move {
   uint64_t gid;
   double B[3], bref, open;
+  double hist[2][3]; /* the extrapolation window's samples */
   src_state st; /* Bs, bvar, and its children's (for its subscribers) */
 } msg_move;
 
@@ -963,6 +977,7 @@ static hr_status move_elements(hr_solver *s, const int32_t *old, hr_err *err) {
     m->gid = s->el[e].gid;
     memcpy(m->B, s->B[e], sizeof m->B);
     m->bref = s->bref[e], m->open = s->open[e];
+    memcpy(m->hist, s->hist[e], sizeof m->hist);
     src_state_get(s, (int32_t)e, &m->st);
     dest[n++] = s->eown[e];
   }
@@ -980,6 +995,7 @@ static hr_status move_elements(hr_solver *s, const int32_t *old, hr_err *err) {
     }
     memcpy(s->B[e], m.B, sizeof m.B);
     s->bref[e] = m.bref, s->open[e] = m.open;
+    memcpy(s->hist[e], m.hist, sizeof m.hist);
   }
   free(in);
   return hr_dist_agree(s, st, err);

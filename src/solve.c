@@ -44,6 +44,7 @@ void hr_options_default(hr_options *o) {
   o->threads = 0;
   o->max_iters = 1000;
   o->max_links = 5e7;
+  o->extrapolate = 1;
 }
 
 /* Area-weighted mean emitted radiosity (largest channel): the radiosity unit before any light
@@ -140,6 +141,7 @@ void hr_solver_destroy(hr_solver **ps) {
   free(s->rho_max);
   free(s->bref);
   free(s->bvar);
+  free(s->hist);
   free(s->open);
   free(s->links);
   free(s->pool);
@@ -344,8 +346,10 @@ static hr_status check_physical(const hr_solver *s, hr_err *err) {
 #define STALL_Q 0.9995
 #define STALL_N 50
 static hr_status check_contracting(hr_solver *s, double abs, int64_t nnew, hr_err *err) {
-  if (nnew == 0 && s->prev_abs > 0 && abs >= STALL_Q * s->prev_abs) s->stall++;
-  else s->stall = 0;
+  if (!s->xprev) { /* the step after an extrapolation is no contraction step: no verdict */
+    if (nnew == 0 && s->prev_abs > 0 && abs >= STALL_Q * s->prev_abs) s->stall++;
+    else s->stall = 0;
+  }
   const double q = s->prev_abs > 0 ? abs / s->prev_abs : 0;
   s->prev_abs = abs;
   if (s->stall < STALL_N) return HR_OK;
@@ -398,6 +402,21 @@ static hr_status prepare(hr_solver *s, hr_err *err) {
   return hr_cluster_prepare(s, err);
 }
 
+/* The extrapolation window (pushpull.c) after this iteration's refinement made 'nnew' links
+ * over all ranks: the same on every rank, and saved in a checkpoint. */
+static void set_window(hr_solver *s, int64_t nnew) {
+  s->xprev = s->xlast;
+  s->xlast = 0;
+  if (nnew > 0) s->xwin = 0;
+  s->xwin++;
+  const int ph = s->xwin % HR_XPERIOD;
+  s->xmode = !s->opt.extrapolate     ? HR_X_NONE
+             : ph == HR_XPERIOD - 4 ? HR_X_SAMPLE0
+             : ph == HR_XPERIOD - 2 ? HR_X_SAMPLE1
+             : ph == 0              ? HR_X_APPLY
+                                    : HR_X_NONE;
+}
+
 /* One iteration of Figure 3 at s->bf_e ({7..15}): refinement (not in the first iteration, which
  * only gathers through the initial links: the oracle measures errors against the light each
  * element would get, bref, which needs one gather), gather, push-pull and the physical guard.
@@ -413,12 +432,15 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
   if ((st = hr_dist_agree(s, st == HR_OK ? st : hr_err_set(err, st, "out of memory"), err)))
     return st;
   hr_dist_sum_i64(s->dist, nnew, 1);
+  set_window(s, *nnew);
   double tb = hr_now(), mb = mpi_secs(s);
   gather(s);
   hr_cluster_gather(s);
   double tc = hr_now(), mc = mpi_secs(s), abs = 0;
   if ((st = hr_push_pull(s, &abs, err)) != HR_OK) return st;
   hr_cluster_pull(s);
+  s->xlast = s->xmode == HR_X_APPLY;
+  s->xmode = HR_X_NONE;
   hr_solver_sync_counts(s);
   *change = abs / s->unit;
   if ((st = hr_dist_agree(s, check_physical(s, err), err)) != HR_OK) return st;
@@ -454,7 +476,9 @@ static void advance(hr_solver *s, double change, int64_t nnew, int stop) {
   /* "No link refined" (see lazy refinement below): a few links in a large graph flip with each
    * last digit of B. An iteration that did not refine made none. */
   const int settled = (double)nnew * SETTLE_DIV <= links;
-  int strict = change < o->b_eps && settled;
+  /* The step after an extrapolation measures how far it jumped, not the contraction: nothing
+   * converges on it, and it is the ratio's base for the next one. */
+  int strict = change < o->b_eps && settled && !s->xprev;
   if (at_low) {
     const double prev = s->prev_change;
     s->prev_change = settled ? change : 0;
@@ -469,7 +493,7 @@ static void advance(hr_solver *s, double change, int64_t nnew, int stop) {
      * converged once the links settle, or at once while many new links still appear (the next,
      * lower BF_e will refine them anyway). */
     int many = (double)nnew * 100.0 >= (double)o->relax_links * (double)s->g_links;
-    level_done = change < o->b_max && (settled || many);
+    level_done = change < o->b_max && (settled || many) && !s->xprev;
   }
   /* Lazy refinement. Once a sweep makes few links, the iterations only
    * gather until B has converged for this level, and then one sweep checks the links again.

@@ -73,8 +73,10 @@ static void resume_identical(void) {
   hr_solver_destroy(&sv);
   printf("  uninterrupted: %lld elements, %lld links, %d iterations\n",
          (long long)full.st.elements, (long long)full.st.links, full.st.iterations);
-  int ks[] = {1, 2, 5, full.st.iterations / 2, full.st.iterations - 1};
-  for (int i = 0; i < 5; i++) {
+  /* the last three: inside the last extrapolation window, with its samples taken (solve.c) */
+  const int n = full.st.iterations;
+  int ks[] = {1, 2, 5, n / 2, n - 3, n - 2, n - 1};
+  for (int i = 0; i < 7; i++) {
     hr_err err;
     stopper sp = {ks[i], HR_ERR_IO};
     CHECK(hr_solver_create(s, &o1, &sv, &err) == HR_OK, "%s", err.msg);

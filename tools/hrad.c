@@ -809,6 +809,8 @@ static void usage(void) {
       "  --b-eps X            convergence: max change of B below X (> 0, default %g)\n"
       "  --b-max X            B_max of the relaxed inner loop (>= B_eps, default %g)\n"
       "  --no-relax           rigid inner loop (paper Figure 3) instead of section 2.2.4\n"
+      "  --no-extrapolate     plain Jacobi iterations, without the Aitken extrapolation\n"
+      "                       of the radiosity every 5 iterations without new links\n"
       "  --rays K             rays per link for the visible fraction H (1..4096, default %d)\n"
       "  --seed N             jitter seed (0..2^64-1, default %llu)\n"
       "  --threads N          worker threads (0..%d, default 0: all cores)\n"
@@ -1054,6 +1056,7 @@ static void parse_args(cli *c, int argc, char **argv) {
     else if (!strcmp(a, "--snapshots")) c->snapshots = 1;
     else if (!strcmp(a, "--hdr")) c->hdr = 1;
     else if (!strcmp(a, "--no-relax")) o->relax = 0;
+    else if (!strcmp(a, "--no-extrapolate")) o->extrapolate = 0;
     else if (!strcmp(a, "--bf-low")) {
       const char *v = NEXT();
       if (!((o->bf_low = parse_real(a, v)) > 0)) die_usage("--bf-low must be > 0, got '%s'", v);
