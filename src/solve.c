@@ -305,10 +305,9 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uin
 }
 
 /* The guard against a wrong answer: every leaf's radiosity must be finite and at most
- * BOUND_SLACK times the physical bound E_max / (1 - rho_max) (no scene, open or closed, can
+ * HR_BOUND_SLACK times the physical bound E_max / (1 - rho_max) (no scene, open or closed, can
  * exceed it; the slack leaves room for the discretisation). A solution that breaks it is an
  * error, never a result. */
-#define BOUND_SLACK 2.0
 static hr_status check_physical(const hr_solver *s, hr_err *err) {
   const hr_scene *sc = s->scene;
   double emax = 0, rmax = 0;
@@ -317,7 +316,7 @@ static hr_status check_physical(const hr_solver *s, hr_err *err) {
       emax = sc->mats[m].emit[c] > emax ? sc->mats[m].emit[c] : emax;
       rmax = sc->mats[m].rho[c] > rmax ? sc->mats[m].rho[c] : rmax;
     }
-  const double bound = rmax < 1 ? BOUND_SLACK * emax / (1 - rmax) : INFINITY;
+  const double bound = rmax < 1 ? HR_BOUND_SLACK * emax / (1 - rmax) : INFINITY;
   for (int64_t e = 0; e < s->nel; e++) {
     if (s->el[e].child >= 0 || !hr_owns(s, e)) continue;
     for (int c = 0; c < 3; c++) {
@@ -395,6 +394,13 @@ static double mpi_secs(const hr_solver *s) {
  * hierarchy and the open fractions of the surfaces. */
 static hr_status prepare(hr_solver *s, hr_err *err) {
   hr_status st;
+  double emax = 0, rmax = 0;
+  for (int m = 0; m < s->scene->nmats; m++)
+    for (int c = 0; c < 3; c++) {
+      emax = fmax(emax, s->scene->mats[m].emit[c]);
+      rmax = fmax(rmax, s->scene->mats[m].rho[c]);
+    }
+  s->xbound = rmax < 1 ? HR_BOUND_SLACK * emax / (1 - rmax) : INFINITY; /* check_physical's */
   if (!s->vis && (st = hr_vis_create(s->scene, &s->vis, err)) != HR_OK) return st;
   if (!s->shaft && (st = hr_shaft_index_create(s->scene, &s->shaft)) != HR_OK)
     return hr_err_set(err, st, "cannot build the shaft-culling hierarchy");

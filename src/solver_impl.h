@@ -70,6 +70,11 @@ enum { HR_REFINE_EVERY, HR_REFINE_LAZY, HR_REFINE_SETTLED };
 enum { HR_X_NONE, HR_X_SAMPLE0, HR_X_SAMPLE1, HR_X_APPLY };
 #define HR_XPERIOD 5
 
+/* A leaf's radiosity above this many times E_max / (1 - rho_max) is an error (solve.c,
+ * check_physical): the slack leaves room for the discretisation (closed boxes' row sums, about
+ * 0.8% above 1, move B = E / (1 - rho) by 18% at rho 0.95). */
+#define HR_BOUND_SLACK 2.0
+
 struct hr_solver {
   const hr_scene *scene;
   hr_options opt;
@@ -142,6 +147,8 @@ struct hr_solver {
                          extrapolation window (pushpull.c) */
   int xmode;          /* the current push-pull's part in it: HR_X_* */
   int xlast;          /* the last iteration extrapolated */
+  double xbound;      /* no extrapolated radiosity above HR_BOUND_SLACK E_max / (1 - rho_max),
+                         what check_physical (solve.c) accepts */
   int xprev;          /* the one before the last did (the last one's step is not a contraction
                          step: solve.c reads no convergence from it) */
   /* counters */

@@ -59,7 +59,8 @@ static void furnace(void) {
     hr_stats plain;
     hr_solver_stats(sw, &plain);
     hr_solver_destroy(&sw);
-    /* Aitken extrapolation (pushpull.c) reaches the same answer in fewer iterations. */
+    /* Aitken extrapolation (pushpull.c) reaches the same answer in fewer iterations (12 of 179
+     * measured; 15 while jumps above the physical bound were kept). */
     sw = t_solve(w, NULL);
     check_all_polys(sw, w, 20.0, 5e-4, "white box, extrapolated (5e-4)");
     hr_stats ex;
