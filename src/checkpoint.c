@@ -5,13 +5,13 @@
  * where anything sits in memory: not on the thread count, and later not on how elements are
  * spread over processes. Element geometry is not stored (it follows from the gid); the per-element
  * state the next iteration reads is (B, what it sends, the oracle's reference and spread, the
- * open fraction, the extrapolation's samples). Because the solver's sums run in gid order (hr_link_sort, gather), a resumed
- * run ends bit-identical to an uninterrupted one.
+ * open fraction, the extrapolation's samples). Because the solver's sums run in gid order
+ * (hr_link_sort, gather), a resumed run ends bit-identical to an uninterrupted one.
  *
  * Layout (little-endian): "HRADCKP1", u32 version, u64 scene hash, u64 options hash, the progress
- * of Figure 3 (with the extrapolation window), the elements, the links with their candidate lists, and a u64 checksum of all that
- * precedes it. A file is written to PATH.tmp and renamed into place, so a kill leaves the
- * previous checkpoint intact. */
+ * of Figure 3 (with the extrapolation window), the elements, the links with their candidate
+ * lists, and a u64 checksum of all that precedes it. A file is written to PATH.tmp and renamed
+ * into place, so a kill leaves the previous checkpoint intact. */
 #include "cluster.h"
 #include "mpi/dist.h"
 #include "solver_impl.h"

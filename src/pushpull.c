@@ -42,11 +42,11 @@ static void pp_down(hr_solver *s, int32_t idx, const double down[5], double g[5]
  *   b <- b + D r / (1 - r),  r = D / D2,
  * applied only where the sequence contracts monotonically (0 < r < XMAX_R) and moves by more than
  * round-off, and kept only where the result stays between the emission and the bound that
- * check_physical (solve.c) holds every leaf to: a jump never makes what it would call an error. Two iterations apart,
- * not one: between two facing white surfaces light alternates, a mode of eigenvalue near -1
- * that one-step ratios misread (measured: one-step extrapolation did nothing on the conference
- * room's white-board cavity). Samples need a window without new links (solve.c): a new link
- * changes the iteration being extrapolated. */
+ * check_physical (solve.c) holds every leaf to: a jump never makes what it would call an
+ * error. Two iterations apart, not one: between two facing white surfaces light alternates, a
+ * mode of eigenvalue near -1 that one-step ratios misread (measured: one-step extrapolation did
+ * nothing on the conference room's white-board cavity). Samples need a window without new
+ * links (solve.c): a new link changes the iteration being extrapolated. */
 #define XMAX_R 0.995
 #define XMIN_D 1e-9
 
@@ -60,7 +60,7 @@ static void pp_extrapolate(hr_solver *s, int32_t idx, const double emit[3], doub
     const double D = b[c] - h[1][c], D2 = h[1][c] - h[0][c];
     if (!(D * D2 > 0 && fabs(D) < XMAX_R * fabs(D2) && fabs(D) > XMIN_D * s->unit)) continue;
     const double r = D / D2, nb = b[c] + D * r / (1 - r);
-    if (nb >= emit[c] && nb <= s->xbound) b[c] = nb; /* physical, and so finite */
+    if (nb >= emit[c] && nb <= HR_BOUND_SLACK * s->bphys) b[c] = nb; /* physical, so finite */
   }
 }
 

@@ -310,13 +310,7 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uin
  * error, never a result. */
 static hr_status check_physical(const hr_solver *s, hr_err *err) {
   const hr_scene *sc = s->scene;
-  double emax = 0, rmax = 0;
-  for (int m = 0; m < sc->nmats; m++)
-    for (int c = 0; c < 3; c++) {
-      emax = sc->mats[m].emit[c] > emax ? sc->mats[m].emit[c] : emax;
-      rmax = sc->mats[m].rho[c] > rmax ? sc->mats[m].rho[c] : rmax;
-    }
-  const double bound = rmax < 1 ? HR_BOUND_SLACK * emax / (1 - rmax) : INFINITY;
+  const double bound = HR_BOUND_SLACK * s->bphys;
   for (int64_t e = 0; e < s->nel; e++) {
     if (s->el[e].child >= 0 || !hr_owns(s, e)) continue;
     for (int c = 0; c < 3; c++) {
@@ -328,7 +322,7 @@ static hr_status check_physical(const hr_solver *s, hr_err *err) {
                         "polygon of material '%s' (input polygon %d), where at most %g (E/(1-rho)) "
                         "is possible; please report this scene",
                         s->iterations + 1, b, sc->mats[f->material].name,
-                        hr_scene_poly_input(sc, f->poly), emax / (1 - rmax));
+                        hr_scene_poly_input(sc, f->poly), s->bphys);
     }
   }
   return HR_OK;
@@ -390,8 +384,8 @@ static double mpi_secs(const hr_solver *s) {
 }
 
 
-/* Builds what the iterations need that a checkpoint does not hold: the ray caster, the shaft
- * hierarchy and the open fractions of the surfaces. */
+/* Builds what the iterations need that a checkpoint does not hold: the physical bound, the ray
+ * caster, the shaft hierarchy and the open fractions of the surfaces. */
 static hr_status prepare(hr_solver *s, hr_err *err) {
   hr_status st;
   double emax = 0, rmax = 0;
@@ -400,7 +394,7 @@ static hr_status prepare(hr_solver *s, hr_err *err) {
       emax = fmax(emax, s->scene->mats[m].emit[c]);
       rmax = fmax(rmax, s->scene->mats[m].rho[c]);
     }
-  s->xbound = rmax < 1 ? HR_BOUND_SLACK * emax / (1 - rmax) : INFINITY; /* check_physical's */
+  s->bphys = rmax < 1 ? emax / (1 - rmax) : INFINITY;
   if (!s->vis && (st = hr_vis_create(s->scene, &s->vis, err)) != HR_OK) return st;
   if (!s->shaft && (st = hr_shaft_index_create(s->scene, &s->shaft)) != HR_OK)
     return hr_err_set(err, st, "cannot build the shaft-culling hierarchy");

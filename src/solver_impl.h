@@ -147,10 +147,11 @@ struct hr_solver {
                          extrapolation window (pushpull.c) */
   int xmode;          /* the current push-pull's part in it: HR_X_* */
   int xlast;          /* the last iteration extrapolated */
-  double xbound;      /* no extrapolated radiosity above HR_BOUND_SLACK E_max / (1 - rho_max),
-                         what check_physical (solve.c) accepts */
   int xprev;          /* the one before the last did (the last one's step is not a contraction
                          step: solve.c reads no convergence from it) */
+  double bphys;       /* E_max / (1 - rho_max) over the materials (infinite at rho_max 1): the
+                         physical bound on radiosity, which check_physical (solve.c) holds
+                         leaves to with HR_BOUND_SLACK, and extrapolation too; set in prepare */
   /* counters */
   int64_t rays, initial_links;
   int iterations, converged, threads;
