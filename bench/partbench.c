@@ -16,13 +16,19 @@
  * partitioning time except for dist-anneal, whose clustering and contraction each rank does
  * for its own elements (1/P of the measured time) before every rank runs a chain: here the P
  * chains run one after another ("time ms" is all of them), and "P-rank ms" counts the median
- * one. dist-anneal starts, as the solver does, from whole surfaces by area, or in a clustered
- * run's graph (nodes with the top gid bit) from preorder runs of the hierarchy, and cuts each
- * part's tree into pieces (hr_partition_tree_cut).
+ * one. dist-anneal starts, as the solver does, from whole surfaces by recursive bisection of
+ * their centres, or in a clustered run's graph (nodes with the top gid bit) from preorder runs
+ * of the hierarchy, and cuts each part's tree into pieces (beyond HR_PARTITION_CHAINS
+ * parts with neighbouring roots joined: hr_partition_tree_cut_near).
  *
  * Environment: PARTBENCH_METHOD=M only method M (0 random .. 6 dist-anneal), PARTBENCH_P=P only
  * P parts, PARTBENCH_PIECES=1 prints dist-anneal's piece count, PARTBENCH_GROW=1 makes its
- * pieces by the paper's growth (hr_partition_cluster) instead, as the solver did before. */
+ * pieces by the paper's growth (hr_partition_cluster) instead, as the solver did before,
+ * PARTBENCH_EFFORT=E gives dist-anneal's chains effort E instead of the solver's
+ * (hr_partition_chain_effort), PARTBENCH_NEAR=1 (0) cuts joining neighbouring roots (without)
+ * at every P instead of the solver's choice, PARTBENCH_CLUSTERS=K aims at K pieces instead of
+ * HR_PARTITION_CLUSTERS, PARTBENCH_SCATTER=1 starts an unclustered graph as the solver did
+ * before the sixth pass: whole surfaces by weight, largest first, to the least loaded part. */
 #include "hrad.h"
 #include "partition/partition.h"
 
@@ -117,8 +123,10 @@ static int32_t index_of(const graph *G, uint64_t gid) {
 /* A cluster of a clustered run's graph (cluster.h: gids with the top bit). */
 static int is_cluster(uint64_t gid) { return (int)(gid >> 63); }
 
-/* The start of a run's first balancing: whole surfaces (an element's tree with its root), here
- * by the work of the tree, largest first, each to the least loaded part. */
+/* The start of a run's first balancing: whole surfaces (an element's tree with its root) by
+ * recursive bisection of the roots' centres, here weighted by the work of the tree (the solver,
+ * before any work is known, by area); with PARTBENCH_SCATTER by that work, largest first, each
+ * to the least loaded part. */
 static void whole_surfaces(const graph *G, int P, int32_t *part) {
   const int n = G->g.n;
   int32_t *root = malloc((size_t)(n + 1) * sizeof *root);
@@ -130,7 +138,9 @@ static void whole_surfaces(const graph *G, int P, int32_t *part) {
     root[v] = r;
     tw[r] += G->g.w[v];
   }
-  hr_partition_greedy(tw, n, P, rpart); /* non-roots weigh 0 here and go anywhere */
+  /* non-roots weigh 0 here and go anywhere */
+  if (getenv("PARTBENCH_SCATTER")) hr_partition_greedy(tw, n, P, rpart);
+  else hr_partition_orb(G->xyz, tw, n, P, rpart);
   for (int v = 0; v < n; v++) part[v] = rpart[root[v]];
   free(root), free(tw), free(rpart);
 }
@@ -170,7 +180,8 @@ static int dist_anneal(const graph *G, int P, double alpha, int32_t *part, doubl
   /* the start is given in a run: not timed. With clusters, preorder runs of the tree (here by
    * W; the solver, before any work is known, by the surfaces' area): a compact start lets the
    * cut along the tree (clusters included) make pieces of the scene, where whole surfaces
-   * scattered by area leave at least one piece per surface */
+   * scattered by area leave at least one piece per surface; without clusters, surfaces by
+   * bisection, whose neighbouring roots the cut joins */
   int clustered = 0;
   for (int v = 0; v < g->n && !clustered; v++) clustered = is_cluster(G->gid[v]);
   int32_t *par = malloc((size_t)(g->n + 1) * sizeof *par);
@@ -181,7 +192,8 @@ static int dist_anneal(const graph *G, int P, double alpha, int32_t *part, doubl
   int32_t *cl = malloc((size_t)(g->n + 1) * sizeof *cl);
   double total = 0;
   for (int v = 0; v < g->n; v++) total += g->w[v];
-  int per = HR_PARTITION_CLUSTERS / P;
+  const char *pc = getenv("PARTBENCH_CLUSTERS");
+  int per = (pc ? atoi(pc) : HR_PARTITION_CLUSTERS) / P;
   per = per > HR_PARTITION_CLUSTERS_MIN ? per : HR_PARTITION_CLUSTERS_MIN;
   int nc;
   if (getenv("PARTBENCH_GROW")) {
@@ -190,7 +202,12 @@ static int dist_anneal(const graph *G, int P, double alpha, int32_t *part, doubl
     nc = hr_partition_cluster(&t, part, total / ((double)P * per), g->n, cl);
     free((void *)t.xadj), free((void *)t.adj), free((void *)t.c);
   } else {
-    nc = hr_partition_tree_cut(par, g->w, g->n, part, total / ((double)P * per), cl);
+    /* as the solver (cluster_own in src/balance.c): roots joined beyond full-effort chains */
+    const int near = getenv("PARTBENCH_NEAR")  ? atoi(getenv("PARTBENCH_NEAR"))
+                                               : P > HR_PARTITION_CHAINS;
+    nc = near ? hr_partition_tree_cut_near(par, g->w, G->xyz, g->n, part,
+                                           total / ((double)P * per), cl)
+              : hr_partition_tree_cut(par, g->w, g->n, part, total / ((double)P * per), cl);
   }
   free(par);
   if (getenv("PARTBENCH_PIECES")) fprintf(stderr, "P %d: %d pieces\n", P, nc);
@@ -202,10 +219,13 @@ static int dist_anneal(const graph *G, int P, double alpha, int32_t *part, doubl
   *local = now() - t1;
   if (ok) {
     const hr_graph cg = {nc, xadj, adj, w, c};
+    const char *e = getenv("PARTBENCH_EFFORT");
+    const double effort = e ? atof(e) : hr_partition_chain_effort(P);
     for (int r = 0; ok && r < P; r++) {
       for (int v = 0; v < g->n; v++) cpart[cl[v]] = part[v];
       const double t2 = now();
-      ok = hr_partition_anneal(&cg, P, alpha, UINT64_C(1000003) + (uint64_t)r, cpart);
+      ok = hr_partition_anneal_effort(&cg, P, alpha, UINT64_C(1000003) + (uint64_t)r, effort,
+                                      cpart);
       times[r] = now() - t2;
       const double z = hr_partition_cost(&cg, cpart, P, alpha, NULL, NULL);
       if (best < 0 || z < best) best = z, memcpy(won, cpart, (size_t)nc * sizeof *won);

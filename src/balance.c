@@ -582,7 +582,7 @@ typedef struct local_tree {
   int32_t n, ne;
   int64_t *elem;
   int32_t *par;
-  double *w;
+  double *w, *xyz; /* n, 3n: work and centre */
 } local_tree;
 
 static int local_tree_make(const hr_solver *s, const int64_t *recv, const hr_cluster_node *cn,
@@ -592,7 +592,8 @@ static int local_tree_make(const hr_solver *s, const int64_t *recv, const hr_clu
   lt->elem = malloc((size_t)(s->nel + K + 1) * sizeof *lt->elem);
   lt->par = malloc((size_t)(s->nel + K + 1) * sizeof *lt->par);
   lt->w = malloc((size_t)(s->nel + K + 1) * sizeof *lt->w);
-  const int ok = lix && cix && lt->elem && lt->par && lt->w;
+  lt->xyz = malloc((size_t)(3 * (s->nel + K) + 1) * sizeof *lt->xyz);
+  const int ok = lix && cix && lt->elem && lt->par && lt->w && lt->xyz;
   lt->n = 0;
   for (int64_t i = 0; ok && i < s->nel; i++)
     lix[i] = hr_owns(s, i) ? (lt->elem[lt->n] = i, lt->n++) : -1;
@@ -605,11 +606,14 @@ static int local_tree_make(const hr_solver *s, const int64_t *recv, const hr_clu
       const int64_t e = lt->elem[i];
       const int32_t ep = s->el[e].parent;
       lt->w[i] = own_work(s, e, recv);
+      lt->xyz[3 * i] = s->el[e].c.x, lt->xyz[3 * i + 1] = s->el[e].c.y;
+      lt->xyz[3 * i + 2] = s->el[e].c.z;
       if (ep >= 0) p = lix[ep];
       else if (K > 0) p = cix[above[e] & ~HR_CLUSTER_GID];
     } else {
       const hr_cluster_node *c = &cn[lt->elem[i]];
       lt->w[i] = cluster_work(s, c);
+      for (int k = 0; k < 3; k++) lt->xyz[3 * i + k] = c->xyz[k];
       if (c->parent) p = cix[c->parent & ~HR_CLUSTER_GID];
     }
     lt->par[i] = p;
@@ -619,7 +623,7 @@ static int local_tree_make(const hr_solver *s, const int64_t *recv, const hr_clu
 }
 
 static void local_tree_free(local_tree *lt) {
-  free(lt->elem), free(lt->par), free(lt->w);
+  free(lt->elem), free(lt->par), free(lt->w), free(lt->xyz);
   memset(lt, 0, sizeof *lt);
 }
 
@@ -636,7 +640,9 @@ static int32_t cluster_own(const hr_solver *s, const int64_t *recv, const hier *
   local_tree lt = {0};
   int32_t *lcl = malloc((size_t)(s->nel + h->H + 1) * sizeof *lcl), nc = -1;
   if (lcl && local_tree_make(s, recv, h->cn, h->H, h->above, &lt))
-    nc = hr_partition_tree_cut(lt.par, lt.w, lt.n, NULL, bound, lcl);
+    nc = s->nranks > HR_PARTITION_CHAINS
+             ? hr_partition_tree_cut_near(lt.par, lt.w, lt.xyz, lt.n, NULL, bound, lcl)
+             : hr_partition_tree_cut(lt.par, lt.w, lt.n, NULL, bound, lcl);
   for (int64_t i = 0; nc >= 0 && i < s->nel; i++) ecl[i] = -1;
   for (int64_t c = 0; nc >= 0 && c < h->H; c++) h->ccl[c] = -1;
   for (int32_t i = 0; nc >= 0 && i < lt.n; i++) {
@@ -874,7 +880,9 @@ static hr_status plan_clustered(hr_solver *s, int64_t *m, uint64_t **gids, int32
   const hr_graph v = view(&g);
   const uint64_t seed =
       s->opt.seed * 1000003 + (uint64_t)s->rank + (uint64_t)s->nbalance * 7919;
-  if (hr_dist_any(s->dist, !hr_partition_anneal(&v, P, s->bal_alpha, seed, part)))
+  const double effort = hr_partition_chain_effort(P); /* P chains: each may be shorter */
+  if (hr_dist_any(s->dist,
+                  !hr_partition_anneal_effort(&v, P, s->bal_alpha, seed, effort, part)))
     st = hr_err_set(err, HR_ERR_NOMEM, "out of memory (balancing)");
   if (st == HR_OK) { /* the chain with the lowest Z wins (ties: the lowest rank) */
     const int win = hr_dist_argmin(s->dist, hr_partition_cost(&v, part, P, s->bal_alpha, NULL,

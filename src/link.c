@@ -12,6 +12,7 @@
  * next round's active links, until no link splits. */
 #include "mpi/dist.h"
 #include "cluster.h"
+#include "partition/partition.h"
 #include "solver_impl.h"
 #include "vec.h"
 
@@ -495,6 +496,29 @@ static hr_status send_to_owners(hr_solver *s, hr_status st, hr_err *err) {
   return HR_OK;
 }
 
+/* Graph balancing's start in an unclustered run (as spread_by_hierarchy in cluster.c for a
+ * clustered one): whole surfaces, by recursive bisection of their centroids weighted by area,
+ * so that each rank's surfaces are a compact piece of the scene. The balancing's cut then joins
+ * neighbouring surfaces into pieces (hr_partition_tree_cut_near): with surfaces by area,
+ * largest first, scattered over the scene, museum's final graph at 64 ranks made 4,302 pieces
+ * and the annealing took 93 ms a chain; from this start 814 and 23 ms, and a lower Z
+ * (BENCHMARKS.md, "Graph balancing, sixth pass"). 0 when out of memory. */
+static int spread_by_space(hr_solver *s) {
+  const int n = s->scene->nsurfs;
+  double *xyz = malloc((size_t)(3 * n + 1) * sizeof *xyz);
+  double *w = malloc((size_t)(n + 1) * sizeof *w);
+  const int ok = xyz && w;
+  for (int i = 0; ok && i < n; i++) { /* element i is surface i's root */
+    const hr_elem *r = &s->el[i];
+    w[i] = r->area;
+    xyz[3 * i] = r->c.x, xyz[3 * i + 1] = r->c.y, xyz[3 * i + 2] = r->c.z;
+  }
+  const int done = ok && hr_partition_orb(xyz, w, n, s->nranks, s->rootown);
+  free(xyz), free(w);
+  for (int64_t e = 0; done && e < s->nel; e++) s->eown[e] = hr_owner_of(s, s->el[e].gid);
+  return done;
+}
+
 hr_status hr_link_init(hr_solver *s, hr_err *err) {
   const hr_scene *sc = s->scene;
   int n = sc->nsurfs;
@@ -509,6 +533,11 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
                       "%d surfaces make %.3g surface pairs for initial linking, above the limit "
                       "of %.3g (--max-pairs) with --cluster off",
                       n, pairs, s->opt.max_links);
+  /* balanced runs start from compact pieces of the scene (unless the caller chose the
+   * surfaces' ranks or scatters them), before any link exists */
+  if (s->dist && s->bal_method != HR_BALANCE_NONE && !s->own_seed && !s->own_given &&
+      hr_dist_any(s->dist, !spread_by_space(s)))
+    return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
   row *rows = calloc((size_t)n, sizeof *rows);
   if (!rows) return hr_err_set(err, HR_ERR_NOMEM, "out of memory in initial linking");
   /* Progress (HR_PHASE_LINK): row i holds the n-1-i pairs (i, j > i); the calling thread (the

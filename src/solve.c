@@ -534,21 +534,34 @@ static hr_status test_migrate(hr_solver *s, hr_err *err);
 #define BALANCE_GAP 3
 #define BALANCE_GROWTH 0.05
 #define BALANCE_GROWTH_STEPS 3
+/* Balancing's budget: at most this share of the run so far, counting the balancing it would start,
+ * predicted as the last one's time times the square root of the links' growth since: a balancing's
+ * cost grows more slowly than the links, the pieces being capped (measured at 2 ranks: floor 7.7
+ * ms at 4.5 k links, 19 ms at 347 k; museum 0.34 s at 0.5 M, 0.24 s at 2.1 M, without a
+ * migration). A rank's share of the run falls as 1 / P, a balancing's cost does not: at 64 ranks
+ * one balancing of floor's graph is 20 ms against a modelled run of 0.15 s (BENCHMARKS.md, "Graph
+ * balancing, sixth pass"). The paper spent 60 of 144 s annealing on 64 nodes. */
+#define BALANCE_BUDGET 0.1
 
 /* The paper's trigger (2.2.5): balance when the last iteration's idle time, 1 - mean / max of
  * the ranks' busy seconds, exceeds the threshold, and the graph grew since the last balancing
  * (measured: on a busy machine idle time alone fired 10 times in a 46-iteration room run, 7 of
  * them finding nothing better to move to), and the time that idleness would lose over the
  * iterations left is more than the last balancing took (museum at 2 ranks: 2-3 s a balancing,
- * 5-7 of them a run without this). A collective in distributed runs. */
+ * 5-7 of them a run without this), and the budget allows it. A collective in distributed
+ * runs. */
 static hr_status maybe_balance(hr_solver *s, hr_err *err) {
   if (!s->dist || s->bal_method == HR_BALANCE_NONE) return HR_OK;
-  double v[4] = {s->iter_busy, s->iter_wall * hr_solver_iters_left(s), s->t_bal_last,
-                 s->iter_busy};
-  hr_dist_max_f64(s->dist, v, 3);
-  hr_dist_sum_f64(s->dist, v + 3, 1);
-  const double idle = v[0] > 0 ? 1 - v[3] / s->nranks / v[0] : 0;
-  if (s->bal_idle > 0 && idle * v[1] <= v[2]) return HR_OK; /* 0: whatever it costs */
+  double v[6] = {s->iter_busy, s->iter_wall * hr_solver_iters_left(s), s->t_bal_last,
+                 s->t.balance, hr_now() - s->t_start, s->iter_busy};
+  hr_dist_max_f64(s->dist, v, 5);
+  hr_dist_sum_f64(s->dist, v + 5, 1);
+  const double idle = v[0] > 0 ? 1 - v[5] / s->nranks / v[0] : 0;
+  if (s->bal_idle > 0) { /* 0: whatever it costs */
+    const double grew = s->bal_links > 0 ? (double)s->g_links / (double)s->bal_links : 1;
+    const double next = v[2] * sqrt(fmax(grew, 1)); /* the next one's time, predicted */
+    if (idle * v[1] <= v[2] || v[3] + next > BALANCE_BUDGET * v[4]) return HR_OK;
+  }
   /* the graph changes only by refinement: the same graph would give the same partition */
   const int kept = s->nbalance - s->nmoved;
   const double growth =

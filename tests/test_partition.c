@@ -1,8 +1,8 @@
 /* test_partition: the pure partitioners of src/partition against hand-computed and measured
  * numbers: greedy on known weights, ORB on grids (quadrants, weighted shares), METIS on a grid
  * graph (cut near the optimum, balance, determinism), the tree cut and preorder runs of
- * clustered runs' graphs (hand-computed pieces, connectivity, weight bounds, parts kept), and
- * bad input. */
+ * clustered runs' graphs (hand-computed pieces, connectivity, weight bounds, parts kept), the
+ * cut with neighbouring roots joined (a grid of roots into 2 x 2 blocks), and bad input. */
 #include "partition/partition.h"
 #include "xorshift.h"
 
@@ -206,6 +206,60 @@ static void test_tree_cut(void) {
   CHECK(hr_partition_tree_cut(far, one, 3, NULL, 2, cl) == -1, "a parent out of range");
 }
 
+static void test_tree_cut_near(void) {
+  /* 256 lone roots on a 16 x 16 grid, unit weights, bound 4: the plain cut leaves a piece a
+   * root; joined by halving, 64 pieces of 4, each a 2 x 2 block */
+  int32_t par[1023], within[1023], cl[1023], nc;
+  double w[1023], xyz[3 * 1023];
+  for (int v = 0; v < 256; v++)
+    par[v] = -1, w[v] = 1, xyz[3 * v] = v % 16, xyz[3 * v + 1] = v / 16, xyz[3 * v + 2] = 0;
+  CHECK(hr_partition_tree_cut(par, w, 256, NULL, 4, cl) == 256, "grid: plain cut");
+  nc = hr_partition_tree_cut_near(par, w, xyz, 256, NULL, 4, cl);
+  CHECK(nc == 64, "grid: %d pieces, not 64", nc);
+  int count[64] = {0};
+  for (int v = 0; nc == 64 && v < 256; v++) {
+    CHECK(cl[v] >= 0 && cl[v] < 64, "grid: root %d in piece %d", v, cl[v]);
+    if (cl[v] < 0 || cl[v] >= 64) continue;
+    count[cl[v]]++;
+    for (int u = 0; u < v; u++) /* members of a piece at most a 2 x 2 block's diagonal apart */
+      if (cl[u] == cl[v])
+        CHECK(abs(u % 16 - v % 16) <= 1 && abs(u / 16 - v / 16) <= 1,
+              "grid: %d and %d in piece %d", u, v, cl[v]);
+  }
+  for (int c = 0; nc == 64 && c < 64; c++)
+    CHECK(count[c] == 4, "grid: piece %d of %d", c, count[c]);
+  /* a random forest in 3 random parts: pieces stay in a part, and all but each part's last
+   * weigh the bound; far fewer than the plain cut's, whose roots each make one */
+  rng_state = 11;
+  double tot = 0;
+  for (int v = 0; v < 1023; v++) {
+    par[v] = v < 300 ? -1 : rnd_int(v);
+    w[v] = rnd_in(0, 3);
+    within[v] = rnd_int(3);
+    for (int k = 0; k < 3; k++) xyz[3 * v + k] = rnd_in(-1, 1);
+    tot += w[v];
+  }
+  const int plain = hr_partition_tree_cut(par, w, 1023, within, 20, cl);
+  nc = hr_partition_tree_cut_near(par, w, xyz, 1023, within, 20, cl);
+  double pw[1023] = {0};
+  int pin[1023];
+  for (int c = 0; c < 1023; c++) pin[c] = -1;
+  for (int v = 0; nc > 0 && v < 1023; v++) {
+    CHECK(cl[v] >= 0 && cl[v] < nc, "forest: node %d in piece %d of %d", v, cl[v], nc);
+    if (cl[v] < 0 || cl[v] >= nc) continue;
+    CHECK(pin[cl[v]] < 0 || pin[cl[v]] == within[v], "forest: piece %d crosses parts", cl[v]);
+    pin[cl[v]] = within[v], pw[cl[v]] += w[v];
+  }
+  int light = 0;
+  for (int c = 0; c < nc; c++) light += pw[c] < 20;
+  CHECK(nc > 0 && light <= 3 && nc <= tot / 20 + 3 && nc < plain / 4,
+        "forest: %d pieces (plain cut %d), %d light, total %g", nc, plain, light, tot);
+  /* bad input: a parent out of range, no centres */
+  const int32_t far[3] = {-1, 7, 0};
+  CHECK(hr_partition_tree_cut_near(far, w, xyz, 3, NULL, 2, cl) == -1, "a parent out of range");
+  CHECK(hr_partition_tree_cut_near(par, w, NULL, 3, NULL, 2, cl) == -1, "no centres");
+}
+
 static void test_preorder(void) {
   /* the path in 2 parts: the middles 0.5 .. 4.5 of 5 split at 2.5 */
   const int32_t path[5] = {-1, 0, 1, 2, 3}, want[5] = {0, 0, 1, 1, 1};
@@ -237,6 +291,7 @@ int main(void) {
   test_orb();
   test_metis();
   test_tree_cut();
+  test_tree_cut_near();
   test_preorder();
   if (fails) printf("%d failures\n", fails);
   else printf("test_partition: all passed\n");

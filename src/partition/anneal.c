@@ -891,6 +891,10 @@ static double exact_cost(const hr_graph *g, const int32_t *part, int nparts, dou
   return z;
 }
 
+double hr_partition_chain_effort(int nchains) {
+  return (double)HR_PARTITION_CHAINS / (nchains > 1 ? nchains : 1);
+}
+
 int hr_partition_anneal(const hr_graph *g, int nparts, double alpha, uint64_t seed,
                         int32_t *part) {
   return hr_partition_anneal_effort(g, nparts, alpha, seed, 1.0, part);

@@ -59,6 +59,18 @@ int hr_partition_cluster(const hr_graph *g, const int32_t *within, double bound,
 int hr_partition_tree_cut(const int32_t *parent, const double *w, int32_t n,
                           const int32_t *within, double bound, int32_t *cluster);
 
+/* hr_partition_tree_cut with the roots joined where they are close: the roots of each part of
+ * 'within' (nodes without a parent, or whose parent is in another part; all of them when
+ * 'within' is NULL) first hang under a binary tree of weightless nodes made by halving them,
+ * again and again, across the longest side of their centres' box (xyz: n x 3), so that light
+ * trees next to each other (the whole surfaces of an unclustered scene, each its own tree) make
+ * one piece rather than a piece each: museum's final graph at 64 parts had 4,302 pieces, one a
+ * surface, where 1,024 were meant. Pieces are numbered as the cut numbers them, without the
+ * ones that hold no node of the forest; returns the count, -1 as hr_partition_tree_cut. */
+int hr_partition_tree_cut_near(const int32_t *parent, const double *w, const double *xyz,
+                               int32_t n, const int32_t *within, double bound,
+                               int32_t *cluster);
+
 /* A forest's nodes in preorder (as hr_partition_tree_cut's) cut into nparts runs of equal
  * weight: node v goes to the part where the middle of its weight falls. A run of a preorder
  * is a union of subtrees and the path above them: where the tree is spatial (clusters over
@@ -79,6 +91,19 @@ int hr_partition_contract(const hr_graph *g, const int32_t *cluster, int nc, int
  * measured with bench/partbench (BENCHMARKS.md, "Graph balancing, third pass"). */
 #define HR_PARTITION_CLUSTERS 1024
 #define HR_PARTITION_CLUSTERS_MIN 16
+
+/* The parallel annealing (the solver's --balance anneal) runs one chain a rank from the same
+ * start and keeps the best. The proposal budget of each of 'nchains' chains (the effort of
+ * hr_partition_anneal_effort) is HR_PARTITION_CHAINS / nchains: the chains together make as
+ * many proposals at any P. With few chains each searches longer (at 2-4 ranks a chain's time is
+ * mostly its fixed passes over the graph, and effort 4 instead of 1 lowered the conference
+ * room's Z by 2.5%); with many, each is shorter, as it must be, since a rank's share of the run
+ * falls as 1 / P while a chain's work does not. Beyond HR_PARTITION_CHAINS ranks the solver
+ * also joins neighbouring roots into pieces (hr_partition_tree_cut_near). Measured with
+ * bench/partbench on floor, room, museum and the conference room: BENCHMARKS.md, "Graph
+ * balancing, sixth pass". */
+#define HR_PARTITION_CHAINS 16
+double hr_partition_chain_effort(int nchains);
 
 /* The paper's method: clustering (traverse maximum-weight edges from unvisited nodes until a
  * cluster reaches a size bound), simulated annealing of the clustered graph on Z with Metropolis

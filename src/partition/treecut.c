@@ -66,6 +66,90 @@ int hr_partition_tree_cut(const int32_t *parent, const double *w, int32_t n,
   return nc;
 }
 
+/* Halving of the roots (treecut_near below): qsort has no context argument in C11. */
+static const double *g_xyz;
+static int g_axis;
+
+static int cmp_axis(const void *a, const void *b) {
+  const int32_t i = *(const int32_t *)a, j = *(const int32_t *)b;
+  const double x = g_xyz[3 * i + g_axis], y = g_xyz[3 * j + g_axis];
+  if (x != y) return x < y ? -1 : 1;
+  return (i > j) - (i < j);
+}
+
+/* Hangs the m nodes idx[] under a binary tree of new nodes numbered from *next (parent[] of
+ * the new nodes and of idx[] set, 'part' their within value) and returns its top: idx[0]
+ * itself when m is 1. */
+static int32_t halve(const double *xyz, int32_t *idx, int32_t m, int32_t part, int32_t *parent,
+                     int32_t *within, int32_t *next) {
+  if (m == 1) return idx[0];
+  double lo[3], hi[3];
+  for (int k = 0; k < 3; k++) lo[k] = hi[k] = xyz[3 * idx[0] + k];
+  for (int32_t i = 1; i < m; i++)
+    for (int k = 0; k < 3; k++) {
+      const double v = xyz[3 * idx[i] + k];
+      lo[k] = v < lo[k] ? v : lo[k];
+      hi[k] = v > hi[k] ? v : hi[k];
+    }
+  int axis = 0;
+  for (int k = 1; k < 3; k++) axis = hi[k] - lo[k] > hi[axis] - lo[axis] ? k : axis;
+  g_xyz = xyz, g_axis = axis;
+  qsort(idx, (size_t)m, sizeof *idx, cmp_axis);
+  const int32_t v = (*next)++, h = m / 2;
+  const int32_t a = halve(xyz, idx, h, part, parent, within, next);
+  const int32_t b = halve(xyz, idx + h, m - h, part, parent, within, next);
+  parent[a] = parent[b] = v;
+  parent[v] = -1, within[v] = part;
+  return v;
+}
+
+static int cmp_int2(const void *a, const void *b) { /* (part, node) pairs */
+  const int32_t *x = a, *y = b;
+  if (x[0] != y[0]) return x[0] < y[0] ? -1 : 1;
+  return (x[1] > y[1]) - (x[1] < y[1]);
+}
+
+int hr_partition_tree_cut_near(const int32_t *parent, const double *w, const double *xyz,
+                               int32_t n, const int32_t *within, double bound,
+                               int32_t *cluster) {
+  if (!parent || !w || !xyz || !cluster || n < 0) return -1;
+  for (int32_t v = 0; v < n; v++)
+    if (parent[v] < -1 || parent[v] >= n) return -1;
+  /* n nodes, at most n - 1 new ones */
+  const size_t N = 2 * (size_t)n + 1;
+  int32_t *par = malloc(N * sizeof *par), *in = malloc(N * sizeof *in);
+  int32_t *roots = malloc(N * sizeof *roots), *idx = malloc(N * sizeof *idx);
+  int32_t *cl = malloc(N * sizeof *cl), *map = malloc(N * sizeof *map);
+  double *w2 = malloc(N * sizeof *w2);
+  int nc = -1;
+  if (par && in && roots && idx && cl && map && w2) {
+    int32_t m = 0, next = n;
+    for (int32_t v = 0; v < n; v++) {
+      par[v] = parent[v], in[v] = within ? within[v] : 0, w2[v] = w[v];
+      if (parent[v] < 0 || (within && within[parent[v]] != within[v]))
+        roots[2 * m] = in[v], roots[2 * m + 1] = v, m++;
+    }
+    qsort(roots, (size_t)m, 2 * sizeof *roots, cmp_int2); /* by part, then node */
+    for (int32_t a = 0, b; a < m; a = b) {
+      for (b = a; b < m && roots[2 * b] == roots[2 * a]; b++) idx[b - a] = roots[2 * b + 1];
+      const int32_t top = halve(xyz, idx, b - a, roots[2 * a], par, in, &next);
+      if (top < n) par[top] = parent[top]; /* a lone root keeps its parent */
+    }
+    for (int32_t v = n; v < next; v++) w2[v] = 0;
+    nc = hr_partition_tree_cut(par, w2, next, in, bound, cl);
+    if (nc >= 0) { /* pieces of new nodes only are dropped, the others keep their order */
+      for (int32_t c = 0; c < nc; c++) map[c] = 0;
+      for (int32_t v = 0; v < n; v++) map[cl[v]] = 1;
+      int32_t k = 0;
+      for (int32_t c = 0; c < nc; c++) map[c] = map[c] ? k++ : -1;
+      for (int32_t v = 0; v < n; v++) cluster[v] = map[cl[v]];
+      nc = k;
+    }
+  }
+  free(par), free(in), free(roots), free(idx), free(cl), free(map), free(w2);
+  return nc;
+}
+
 int hr_partition_preorder(const int32_t *parent, const double *w, int32_t n, int nparts,
                           int32_t *part) {
   if (!parent || !w || !part || n < 0 || nparts < 1) return 0;
