@@ -364,12 +364,14 @@ int hr_dist_any(const hr_dist *d, int flag);
  * same scene, options and arguments). An element is owned by a rank, which holds the links it
  * receives. owner[i] is the rank of surface i's root; new elements belong to their parent's
  * rank; NULL spreads the surfaces by area, largest first, each to the rank with the least area
- * so far. A non-zero 'scatter' instead sends every element, at any depth, to a rank drawn from
- * (scatter, its gid): one surface's tree spread over every rank. Every rank then calls
- * hr_solver_run; each holds its own elements and links and ghost copies of what its links see,
- * every root's radiosity afterwards (hr_solver_poly_radiosity works on every rank), and, after
- * hr_solver_collect, rank 0 every leaf. Results, counts and outputs are bit-identical to one
- * process for any assignment.
+ * so far, or, when a balancing method is set (hr_solver_set_balance), by recursive bisection of
+ * their centroids weighted by area (a compact piece of the scene a rank; in a clustered run,
+ * runs of the cluster hierarchy), before initial linking. A non-zero 'scatter' instead sends
+ * every element, at any depth, to a rank drawn from (scatter, its gid): one surface's tree
+ * spread over every rank. Every rank then calls hr_solver_run; each holds its own elements and
+ * links and ghost copies of what its links see, every root's radiosity afterwards
+ * (hr_solver_poly_radiosity works on every rank), and, after hr_solver_collect, rank 0 every
+ * leaf. Results, counts and outputs are bit-identical to one process for any assignment.
  * HR_ERR_INVALID for a bad owner. */
 hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uint64_t scatter,
                              hr_err *err);
@@ -389,8 +391,11 @@ hr_status hr_solver_migrate(hr_solver *s, const uint64_t *gids, const int32_t *r
 enum { HR_BALANCE_NONE, HR_BALANCE_ANNEAL, HR_BALANCE_METIS, HR_BALANCE_ORB };
 /* Balances with 'method' (HR_BALANCE_*) after initial linking and whenever an iteration's idle
  * time (1 - mean over max of the ranks' busy seconds in refinement, gathering and push-pull)
- * exceeds 'idle' (in [0, 1]); 'alpha' weighs communication against work in the paper's cost
- * (eq. (5)), in [0, 1]. Call before hr_solver_run on every rank. HR_ERR_INVALID for bad values. */
+ * exceeds 'idle' (in [0, 1]), if what that idleness would lose pays for a balancing and the
+ * balancings stay within 10% of the run (idle 0: every third iteration, whatever it costs);
+ * 'alpha' weighs communication against work in the paper's cost (eq. (5)), in [0, 1]. Call
+ * before hr_solver_run on every rank. HR_ERR_INVALID for bad values. The hrad program uses
+ * HR_BALANCE_ANNEAL, 0.5 and 0.1 unless told otherwise. */
 hr_status hr_solver_set_balance(hr_solver *s, int method, double alpha, double idle,
                                 hr_err *err);
 /* Balances now (a collective; a no-op in one process or for HR_BALANCE_NONE). */
