@@ -301,6 +301,12 @@ typedef struct hr_stats {
   hr_timing time_s;
   int64_t clusters;      /* cluster nodes (0 without clustering) */
   int64_t cluster_links; /* links with a cluster at one end or both (counted in 'links') */
+  int ranks;             /* processes (hr_solver_set_dist); 1 without */
+  /* how elements were given to ranks: "anneal", "metis" or "orb" (graph balancing), "random"
+   * (scattered by gid), "given" (the caller's owners, never moved), "area" (whole surfaces by
+   * area, never moved); "" in one process */
+  const char *balance;
+  int64_t balancings, migrations; /* graph balancings done, and those that moved elements */
 } hr_stats;
 
 hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solver **out,

@@ -84,6 +84,14 @@ hr_status hr_report_json(const char *path, const hr_solver *s, const hr_options 
   fprintf(f, "  \"rays\": %lld,\n", (long long)t.rays);
   fprintf(f, "  \"converged\": %s,\n", t.converged ? "true" : "false");
   fprintf(f, "  \"threads\": %d,\n", t.threads);
+  fprintf(f, "  \"ranks\": %d,\n", t.ranks);
+  if (t.ranks > 1)
+    fprintf(f,
+            "  \"balance\": {\"method\": \"%s\", \"balancings\": %lld, "
+            "\"migrations\": %lld},\n",
+            t.balance, (long long)t.balancings, (long long)t.migrations);
+  else
+    fprintf(f, "  \"balance\": null,\n");
   fprintf(f, "  \"peak_rss_mb\": %.1f,\n", t.peak_rss_mb);
   fprintf(f, "  \"links_per_s\": %.0f,\n", t.time_s.total > 0 ? t.links / t.time_s.total : 0);
   fprintf(f, "  \"rays_per_s\": %.0f,\n", t.time_s.total > 0 ? t.rays / t.time_s.total : 0);

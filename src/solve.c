@@ -676,6 +676,14 @@ void hr_solver_stats(const hr_solver *s, hr_stats *st) {
   struct rusage ru;
   if (getrusage(RUSAGE_SELF, &ru) == 0) st->peak_rss_mb = (double)ru.ru_maxrss / 1024.0;
   st->time_s = s->t;
+  static const char *const method[] = {"", "anneal", "metis", "orb"};
+  st->ranks = s->dist ? s->nranks : 1;
+  st->balance = !s->dist                           ? ""
+                : s->bal_method != HR_BALANCE_NONE ? method[s->bal_method]
+                : s->own_seed                      ? "random"
+                : s->own_given                     ? "given"
+                                                   : "area";
+  st->balancings = s->nbalance, st->migrations = s->nmoved;
 }
 
 static int cmp_omap(const void *a, const void *b) {

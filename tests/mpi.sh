@@ -55,6 +55,14 @@ mpi 2 "${q[@]}" --threads 2 -o "$t/c2t2" cornell && same "$t/c1" "$t/c2t2" corne
   "cornell, 2 ranks x 2 threads" || bad "cornell 2x2: exit $?"
 mpi 3 "${q[@]}" --threads 1 --balance area -o "$t/c3a" cornell && same "$t/c1" "$t/c3a" cornell \
   "cornell, 3 ranks, --balance area (whole surfaces)" || bad "cornell --balance area: exit $?"
+# stats.json says how a run was spread: ranks, and the balancing (null in one process)
+sj() { grep -c -e "\"ranks\": $2," -e "\"balance\": $3" "$1/stats.json"; }
+[ "$(sj "$t/c1" 1 null)" = 2 ] \
+  && [ "$(sj "$t/c3-mpi" 3 '{"method": "anneal", "balancings": [1-9]')" = 2 ] \
+  && [ "$(sj "$t/c3a" 3 '{"method": "area", "balancings": 0,')" = 2 ] \
+  && ok "stats.json: ranks and balancing (1 process; 3 ranks, annealing by default; area)" \
+  || bad "stats.json: ranks or balance wrong: $(grep -h -e ranks -e '"balance"' "$t/c1/stats.json" \
+    "$t/c3-mpi/stats.json" "$t/c3a/stats.json" | tr '\n' ' ')"
 
 # ---------------------------------------------------------------- random assignments
 # --balance random:N sends every element, at any depth, to a random rank: trees spread over all
