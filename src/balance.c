@@ -57,6 +57,10 @@ typedef struct work_rec {
   int64_t id;
   double w;
 } work_rec;
+typedef struct centre_rec { /* a piece's centre, from the rank that cut it */
+  int64_t id;
+  double xyz[3];
+} centre_rec;
 typedef struct gid_cluster {
   uint64_t gid;
   int64_t id;
@@ -780,12 +784,25 @@ static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, const hier *h, 
     if (a >= 0 && b >= 0 && a != b) acc_add(&acc, a, b, 1.0);
   }
   free(pair);
-  for (int64_t c = 0; c < h->H; c++)
-    if (h->ccl[c] >= 0) w[h->ccl[c]] += cluster_work(s, &h->cn[c]);
+  /* the centres of this rank's pieces: of their nodes, weighted by W + 1 */
+  double *cs = calloc((size_t)(4 * K) + 1, sizeof *cs);
+  if (!cs) hr_dist_abort(s->dist, 1);
+  for (int64_t c = 0; c < h->H; c++) {
+    if (h->ccl[c] < 0) continue;
+    const double wc = cluster_work(s, &h->cn[c]);
+    double *x = cs + 4 * h->ccl[c];
+    w[h->ccl[c]] += wc;
+    for (int k = 0; k < 3; k++) x[k] += (wc + 1) * h->cn[c].xyz[k];
+    x[3] += wc + 1;
+  }
   for (int64_t i = 0; i < s->nel; i++) {
     if (ecl[i] < 0) continue;
-    w[ecl[i]] += held_work(s, i, recv);
+    const double wi = held_work(s, i, recv);
+    w[ecl[i]] += wi;
     if (!hr_owns(s, i)) continue;
+    double *x = cs + 4 * ecl[i];
+    x[0] += (wi + 1) * s->el[i].c.x, x[1] += (wi + 1) * s->el[i].c.y;
+    x[2] += (wi + 1) * s->el[i].c.z, x[3] += wi + 1;
     const int32_t p = s->el[i].parent, b = p >= 0 ? ecl[p] : -1;
     if (b >= 0 && b != ecl[i]) acc_add(&acc, ecl[i], b, 2.0);
   }
@@ -800,12 +817,24 @@ static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, const hier *h, 
   nw = 0;
   for (int32_t a = 0; a < K; a++)
     if (w[a] > 0) wr[nw++] = (work_rec){a, w[a]};
-  void *ae = NULL, *aw = NULL;
-  int64_t ne = 0, nwall = 0;
+  int64_t nx = 0;
+  for (int32_t a = 0; a < K; a++) nx += cs[4 * a + 3] > 0;
+  centre_rec *xr = malloc((size_t)(nx + 1) * sizeof *xr);
+  if (!xr) hr_dist_abort(s->dist, 1);
+  nx = 0;
+  for (int32_t a = 0; a < K; a++) {
+    const double *x = cs + 4 * a;
+    if (x[3] > 0) xr[nx++] = (centre_rec){a, {x[0] / x[3], x[1] / x[3], x[2] / x[3]}};
+  }
+  free(cs);
+  void *ae = NULL, *aw = NULL, *ax = NULL;
+  int64_t ne = 0, nwall = 0, nxall = 0;
   hr_status st = to_rank0(s, e, np, sizeof *e, &ae, &ne);
   free(e);
   if (st == HR_OK) st = to_rank0(s, wr, nw, sizeof *wr, &aw, &nwall);
   free(wr);
+  if (st == HR_OK) st = to_rank0(s, xr, nx, sizeof *xr, &ax, &nxall);
+  free(xr);
   memset(g, 0, sizeof *g);
   if (st == HR_OK && s->rank == 0) {
     g->n = K;
@@ -814,13 +843,17 @@ static hr_status fold_clusters(hr_solver *s, const int32_t *ecl, const hier *h, 
     tmp = malloc((size_t)(ne + 1) * sizeof *tmp);
     if (!g->w || !g->xyz || !tmp) hr_dist_abort(s->dist, 1);
     for (int64_t j = 0; j < nwall; j++) g->w[((work_rec *)aw)[j].id] += ((work_rec *)aw)[j].w;
+    for (int64_t j = 0; j < nxall; j++) {
+      const centre_rec *x = (const centre_rec *)ax + j;
+      memcpy(g->xyz + 3 * x->id, x->xyz, sizeof x->xyz);
+    }
     /* the ranks' pairs (a < b), merged, then both directions */
     bgraph up = {.n = K};
     if (!csr_build(&up, ae, tmp, ne) || !csr_mirror(g, &up)) hr_dist_abort(s->dist, 1);
     bgraph_free(&up);
     free(tmp);
   }
-  free(ae), free(aw), free(w);
+  free(ae), free(aw), free(ax), free(w);
   if (st == HR_OK) share_graph(s, g);
   return st;
 }
@@ -878,6 +911,15 @@ static hr_status plan_clustered(hr_solver *s, int64_t *m, uint64_t **gids, int32
   for (int r = 0; r < P; r++)
     for (int64_t c = first[r]; c < first[r + 1]; c++) now[c] = part[c] = r;
   const hr_graph v = view(&g);
+  /* the chains start from the current owners or from the bisection of the pieces' centres
+   * weighted by W, whichever has the lower Z (the conference room at 8 ranks: 1.043 -> 1.015 of
+   * the best Z found by any method; BENCHMARKS.md, "Graph balancing, sixth pass") */
+  int32_t *orb = malloc((size_t)(K + 1) * sizeof *orb);
+  if (!orb || !hr_partition_orb(g.xyz, g.w, K, P, orb)) hr_dist_abort(s->dist, 1);
+  if (hr_partition_cost(&v, orb, P, s->bal_alpha, NULL, NULL) <
+      hr_partition_cost(&v, part, P, s->bal_alpha, NULL, NULL))
+    memcpy(part, orb, (size_t)K * sizeof *part);
+  free(orb);
   const uint64_t seed =
       s->opt.seed * 1000003 + (uint64_t)s->rank + (uint64_t)s->nbalance * 7919;
   const double effort = hr_partition_chain_effort(P); /* P chains: each may be shorter */
