@@ -81,32 +81,21 @@ done
 # --balance anneal|metis|orb (paper 2.2.5) moves subtrees after initial linking and, with
 # --balance-idle 0 (whatever it costs), every third iteration: the answer does not change.
 # ORB on 4 ranks: from the start by bisection of the surfaces, on 3 its partitions after the
-# first did not lower Z, so nothing moved again.
-for m in anneal metis orb; do
-  np=3
-  [ "$m" = orb ] && np=4
+# first did not lower Z, so nothing moved again. Annealing also on 17: beyond 16 ranks it joins
+# neighbouring surfaces into pieces (hr_partition_tree_cut_near) and shortens its chains.
+for mp in anneal:3 metis:3 orb:4 anneal:17; do
+  m=${mp%:*} np=${mp#*:}
   mpi "$np" --size 96x72 --bf-low 3e-3 --threads 1 --balance "$m" --balance-idle 0 \
     -o "$t/bal-$m" cornell 2> "$t/bal-$m.err" > /dev/null \
     && same "$t/c1" "$t/bal-$m" cornell \
       "cornell, $np ranks, --balance $m, rebalanced every 3 iterations" \
-    || bad "cornell --balance $m: exit $?"
+    || bad "cornell --balance $m on $np ranks: exit $?"
   nb=$(sed -n 's/^graph balancing: \([0-9]*\) times, \([0-9]*\) of them moved.*/\1 \2/p' \
     "$t/bal-$m.err")
-  [ "${nb#* }" -ge 2 ] 2>/dev/null && ok "--balance $m: $nb (balancings, migrations)" \
-    || bad "--balance $m: fewer than 2 migrations: '${nb:-}'"
+  [ "${nb#* }" -ge 2 ] 2>/dev/null && ok "--balance $m, $np ranks: $nb (balancings, migrations)" \
+    || bad "--balance $m, $np ranks: fewer than 2 migrations: '${nb:-}'"
   rm -rf "$t/bal-$m"
 done
-# Beyond 16 ranks the default annealing joins neighbouring surfaces into pieces
-# (hr_partition_tree_cut_near) and shortens its chains: 17 ranks, rebalanced every 3 iterations.
-mpi 17 --size 96x72 --bf-low 3e-3 --threads 1 --balance-idle 0 -o "$t/bal-17" cornell \
-  2> "$t/bal-17.err" > /dev/null \
-  && same "$t/c1" "$t/bal-17" cornell "cornell, 17 ranks, default balancing (joined pieces)" \
-  || bad "cornell on 17 ranks: exit $?"
-nb=$(sed -n 's/^graph balancing: \([0-9]*\) times, \([0-9]*\) of them moved.*/\1 \2/p' \
-  "$t/bal-17.err")
-[ "${nb#* }" -ge 2 ] 2>/dev/null && ok "17 ranks: $nb (balancings, migrations)" \
-  || bad "17 ranks: fewer than 2 migrations: '${nb:-}'"
-rm -rf "$t/bal-17"
 
 # ---------------------------------------------------------------- elements are distributed
 # Each element is owned by exactly one rank (the own counts add up to the one-process element

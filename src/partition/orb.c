@@ -3,6 +3,7 @@
  * parts (k1 = nparts / 2 of them to the lower side), and recurses. Ties in a coordinate are
  * broken by index, so the result is deterministic. O(n log n log nparts). */
 #include "partition/partition.h"
+#include "partition/sort.h"
 
 #include <stdlib.h>
 
@@ -16,26 +17,31 @@ static int cmp_axis(const void *a, const void *b) {
   return (i > j) - (i < j);
 }
 
+void hr_partition_sort_longest(const double *xyz, int32_t *idx, int32_t n) {
+  if (n < 2) return;
+  double lo[3], hi[3];
+  for (int k = 0; k < 3; k++) lo[k] = hi[k] = xyz[3 * idx[0] + k];
+  for (int32_t i = 1; i < n; i++)
+    for (int k = 0; k < 3; k++) {
+      const double v = xyz[3 * idx[i] + k];
+      lo[k] = v < lo[k] ? v : lo[k];
+      hi[k] = v > hi[k] ? v : hi[k];
+    }
+  int axis = 0;
+  for (int k = 1; k < 3; k++) axis = hi[k] - lo[k] > hi[axis] - lo[axis] ? k : axis;
+  g_xyz = xyz, g_axis = axis;
+  qsort(idx, (size_t)n, sizeof *idx, cmp_axis);
+}
+
 static void bisect(const double *xyz, const double *w, int32_t *idx, int n, int first, int np,
                    int32_t *part) {
   if (np == 1 || n == 0) {
     for (int i = 0; i < n; i++) part[idx[i]] = first;
     return;
   }
-  double lo[3], hi[3], total = 0;
-  for (int k = 0; k < 3; k++) lo[k] = hi[k] = xyz[3 * idx[0] + k];
-  for (int i = 0; i < n; i++) {
-    for (int k = 0; k < 3; k++) {
-      const double v = xyz[3 * idx[i] + k];
-      lo[k] = v < lo[k] ? v : lo[k];
-      hi[k] = v > hi[k] ? v : hi[k];
-    }
-    total += w[idx[i]];
-  }
-  int axis = 0;
-  for (int k = 1; k < 3; k++) axis = hi[k] - lo[k] > hi[axis] - lo[axis] ? k : axis;
-  g_xyz = xyz, g_axis = axis;
-  qsort(idx, (size_t)n, sizeof *idx, cmp_axis);
+  double total = 0;
+  for (int i = 0; i < n; i++) total += w[idx[i]];
+  hr_partition_sort_longest(xyz, idx, n);
   const int k1 = np / 2;
   const double want = total * k1 / np;
   /* the lower side takes points while its weight stays below its share (at least one point

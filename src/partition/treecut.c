@@ -1,8 +1,9 @@
 /* treecut.c: partitions and clusterings of a forest (see partition.h): the order of a forest
- * and two uses of it, pieces of a bound's weight cut bottom-up, and runs of equal weight in
- * preorder. For the graphs of clustered runs, whose tree (clusters over surfaces over
- * elements) spans the scene. */
+ * and two uses of it, pieces of a bound's weight cut bottom-up (neighbouring roots joined
+ * first, or not), and runs of equal weight in preorder. For the patch/link graphs, whose trees
+ * (clusters over surfaces over elements, or a surface's elements) span the scene or a part. */
 #include "partition.h"
+#include "sort.h"
 
 #include <stdlib.h>
 
@@ -66,35 +67,13 @@ int hr_partition_tree_cut(const int32_t *parent, const double *w, int32_t n,
   return nc;
 }
 
-/* Halving of the roots (treecut_near below): qsort has no context argument in C11. */
-static const double *g_xyz;
-static int g_axis;
-
-static int cmp_axis(const void *a, const void *b) {
-  const int32_t i = *(const int32_t *)a, j = *(const int32_t *)b;
-  const double x = g_xyz[3 * i + g_axis], y = g_xyz[3 * j + g_axis];
-  if (x != y) return x < y ? -1 : 1;
-  return (i > j) - (i < j);
-}
-
 /* Hangs the m nodes idx[] under a binary tree of new nodes numbered from *next (parent[] of
  * the new nodes and of idx[] set, 'part' their within value) and returns its top: idx[0]
  * itself when m is 1. */
 static int32_t halve(const double *xyz, int32_t *idx, int32_t m, int32_t part, int32_t *parent,
                      int32_t *within, int32_t *next) {
   if (m == 1) return idx[0];
-  double lo[3], hi[3];
-  for (int k = 0; k < 3; k++) lo[k] = hi[k] = xyz[3 * idx[0] + k];
-  for (int32_t i = 1; i < m; i++)
-    for (int k = 0; k < 3; k++) {
-      const double v = xyz[3 * idx[i] + k];
-      lo[k] = v < lo[k] ? v : lo[k];
-      hi[k] = v > hi[k] ? v : hi[k];
-    }
-  int axis = 0;
-  for (int k = 1; k < 3; k++) axis = hi[k] - lo[k] > hi[axis] - lo[axis] ? k : axis;
-  g_xyz = xyz, g_axis = axis;
-  qsort(idx, (size_t)m, sizeof *idx, cmp_axis);
+  hr_partition_sort_longest(xyz, idx, m);
   const int32_t v = (*next)++, h = m / 2;
   const int32_t a = halve(xyz, idx, h, part, parent, within, next);
   const int32_t b = halve(xyz, idx + h, m - h, part, parent, within, next);
