@@ -1920,12 +1920,9 @@ hr_status hr_cluster_init(hr_solver *s, hr_err *err) {
     st = hr_err_set(err, HR_ERR_NOMEM, "out of memory building clusters (injected by "
                                        "HRAD_TEST_FAIL)");
   else st = hr_cluster_prepare(s, err);
-  /* balanced runs start from compact pieces of the hierarchy (unless the caller chose the
-   * surfaces' ranks or scatters them), before any link exists */
-  if (st == HR_OK && s->dist && s->bal_method != HR_BALANCE_NONE && !s->own_seed &&
-      !s->own_given) {
+  if (st == HR_OK && hr_start_compact(s)) {
     if (!spread_by_hierarchy(s)) st = hr_err_set(err, HR_ERR_NOMEM, "out of memory");
-    for (int64_t e = 0; st == HR_OK && e < s->nel; e++) s->eown[e] = hr_owner_of(s, s->el[e].gid);
+    else hr_owners_recompute(s);
   }
   if ((st = hr_dist_agree(s, st, err)) != HR_OK) return st;
   hr_clusters *cl = s->cl;

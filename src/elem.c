@@ -99,6 +99,10 @@ int32_t hr_owner_of(const hr_solver *s, uint64_t gid) {
   return s->rootown[gid >> HR_GID_PATH_BITS];
 }
 
+void hr_owners_recompute(hr_solver *s) {
+  for (int64_t e = 0; e < s->nel; e++) s->eown[e] = hr_owner_of(s, s->el[e].gid);
+}
+
 /* ---------------------------------------------------------------- storage */
 
 static int reserve(hr_solver *s, int64_t need) {

@@ -515,7 +515,7 @@ static int spread_by_space(hr_solver *s) {
   }
   const int done = ok && hr_partition_orb(xyz, w, n, s->nranks, s->rootown);
   free(xyz), free(w);
-  for (int64_t e = 0; done && e < s->nel; e++) s->eown[e] = hr_owner_of(s, s->el[e].gid);
+  if (done) hr_owners_recompute(s);
   return done;
 }
 
@@ -533,10 +533,7 @@ hr_status hr_link_init(hr_solver *s, hr_err *err) {
                       "%d surfaces make %.3g surface pairs for initial linking, above the limit "
                       "of %.3g (--max-pairs) with --cluster off",
                       n, pairs, s->opt.max_links);
-  /* balanced runs start from compact pieces of the scene (unless the caller chose the
-   * surfaces' ranks or scatters them), before any link exists */
-  if (s->dist && s->bal_method != HR_BALANCE_NONE && !s->own_seed && !s->own_given &&
-      hr_dist_any(s->dist, !spread_by_space(s)))
+  if (hr_start_compact(s) && hr_dist_any(s->dist, !spread_by_space(s)))
     return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
   row *rows = calloc((size_t)n, sizeof *rows);
   if (!rows) return hr_err_set(err, HR_ERR_NOMEM, "out of memory in initial linking");
@@ -1042,7 +1039,7 @@ hr_status hr_link_migrate(hr_solver *s, hr_err *err) {
     return st;
   }
   memcpy(old, s->eown, (size_t)s->nel * sizeof *old);
-  for (int64_t e = 0; e < s->nel; e++) s->eown[e] = hr_owner_of(s, s->el[e].gid);
+  hr_owners_recompute(s);
   st = move_elements(s, old, err);
   free(old);
   if (st != HR_OK) return st;

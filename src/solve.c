@@ -253,9 +253,6 @@ hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err) {
 }
 
 /* Every local element's owner from the owner function (after it changed). */
-static void recompute_owners(hr_solver *s) {
-  for (int64_t e = 0; e < s->nel; e++) s->eown[e] = hr_owner_of(s, s->el[e].gid);
-}
 
 int hr_solver_clustered(const hr_solver *s) {
   return hr_cluster_wanted(&s->opt, s->scene->nsurfs);
@@ -290,7 +287,7 @@ hr_status hr_solver_set_dist(hr_solver *s, hr_dist *d, const int32_t *owner, uin
     if (!ok) return hr_err_set(err, HR_ERR_NOMEM, "out of memory");
   }
   s->dist = d;
-  recompute_owners(s);
+  hr_owners_recompute(s);
   const char *tm = getenv("HRAD_TEST_MIGRATE");
   if (tm) s->migrate_seed = strtoull(tm, NULL, 10);
   const char *tf = getenv("HRAD_TEST_FAIL");

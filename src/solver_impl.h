@@ -220,6 +220,14 @@ static inline int hr_owns(const hr_solver *s, int64_t e) {
 }
 /* The rank that owns the element with global id 'gid' (0 in one process). */
 int32_t hr_owner_of(const hr_solver *s, uint64_t gid);
+/* eown[] of every element again from hr_owner_of, after the rules it reads changed. */
+void hr_owners_recompute(hr_solver *s);
+/* 1 where a distributed run starts from a compact piece of the scene a rank, as graph balancing
+ * wants (a method set, and the caller neither chose the surfaces' ranks nor scatters them):
+ * spread_by_hierarchy (cluster.c) or spread_by_space (link.c), before any link exists. */
+static inline int hr_start_compact(const hr_solver *s) {
+  return s->dist && s->bal_method != HR_BALANCE_NONE && !s->own_seed && !s->own_given;
+}
 /* Makes every rank see a failure of any: returns 'st' where this rank failed, HR_ERR_REMOTE
  * (with a message) where another did, HR_OK where none did. A collective in distributed runs. */
 hr_status hr_dist_agree(const hr_solver *s, hr_status st, hr_err *err);

@@ -767,8 +767,8 @@ static void usage(void) {
       "                       outputs are written (e.g. other --camera or --size)\n"
       "\n"
       "Many processes (mpirun -np P hrad ..., README 'Many processes'):\n"
-      "  --balance anneal|metis|orb|none  start with whole surfaces by area (clustered runs:\n"
-      "                       compact pieces of the hierarchy), then balance the patch/link\n"
+      "  --balance anneal|metis|orb|none  start with whole surfaces split by space (clustered\n"
+      "                       runs: compact pieces of the hierarchy), then balance the patch/link\n"
       "                       graph, clusters included, after initial linking and whenever an\n"
       "                       iteration's idle time passes --balance-idle: simulated\n"
       "                       annealing (the paper's 2.2.5; the default), METIS, or\n"
@@ -1126,7 +1126,7 @@ static void parse_args(cli *c, int argc, char **argv) {
         if (k == 4)
           die_usage("--balance must be 'random', 'random:SEED', 'area', 'none', 'anneal', "
                     "'metis' or 'orb', got '%s'", v);
-        /* the graph methods start from whole surfaces by area, then move subtrees */
+        /* the graph methods start from compact pieces of the scene, then move subtrees */
         c->balance_random = 0, c->balance_method = k;
       }
     } else if (!strcmp(a, "--balance-alpha")) {

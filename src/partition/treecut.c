@@ -111,8 +111,7 @@ int hr_partition_tree_cut_near(const int32_t *parent, const double *w, const dou
     qsort(roots, (size_t)m, 2 * sizeof *roots, cmp_int2); /* by part, then node */
     for (int32_t a = 0, b; a < m; a = b) {
       for (b = a; b < m && roots[2 * b] == roots[2 * a]; b++) idx[b - a] = roots[2 * b + 1];
-      const int32_t top = halve(xyz, idx, b - a, roots[2 * a], par, in, &next);
-      if (top < n) par[top] = parent[top]; /* a lone root keeps its parent */
+      halve(xyz, idx, b - a, roots[2 * a], par, in, &next); /* a lone root keeps its parent */
     }
     for (int32_t v = n; v < next; v++) w2[v] = 0;
     nc = hr_partition_tree_cut(par, w2, next, in, bound, cl);
