@@ -1539,15 +1539,11 @@ static int kid_count(const clink *l, int dec) {
  * arrays for every link (56 bytes each, a first touch of every page) set the peak memory. */
 enum { ELEM_LINKS = 1, ELEM_SPLITS = 2 };
 static hr_status places(hr_solver *s, const clink *cur, const int64_t *pos, int64_t n,
-                        const uint8_t *dec, int64_t **ex, int64_t *tot, int *what, hr_status st,
-                        hr_err *err) {
-  int64_t m = 0;
-  int fl = 0, sorted = 1;
-  for (int64_t i = 0; i < n; i++) {
-    const int32_t id = dec[i] == C_SPLIT_R ? cur[i].r : dec[i] == C_SPLIT_S ? cur[i].s : -1;
-    fl |= (dec[i] == C_ELEM ? ELEM_LINKS : 0) | (id >= 0 && s->el[id].child < 0 ? ELEM_SPLITS : 0);
-    m += kid_count(&cur[i], dec[i]) > 0;
-  }
+                        const uint8_t *dec, const int64_t (*cnt)[4], int64_t **ex, int64_t *tot,
+                        int *what, hr_status st, hr_err *err) {
+  /* cnt[c][3]: the splitting links before chunk c (CHUNK links a chunk), cnt[nch][3] all */
+  const int64_t nch = st == HR_OK ? (n + CHUNK - 1) / CHUNK : 0;
+  int64_t m = nch > 0 ? cnt[nch][3] : 0;
   scan_rec *q = malloc((size_t)(m > 0 ? m : 1) * sizeof *q);
   int64_t *k = malloc((size_t)(m > 0 ? m : 1) * sizeof *k);
   int64_t *v = malloc((size_t)(m > 0 ? m : 1) * sizeof *v);
@@ -1555,12 +1551,25 @@ static hr_status places(hr_solver *s, const clink *cur, const int64_t *pos, int6
   *ex = malloc((size_t)(m > 0 ? m : 1) * sizeof **ex);
   if (st == HR_OK && (!q || !k || !v || !e || !*ex)) st = nomem(err);
   if (st != HR_OK) m = 0;
-  for (int64_t i = 0, j = 0; j < m; i++) {
-    if (kid_count(&cur[i], dec[i]) == 0) continue;
-    q[j] = (scan_rec){pos[i], kid_count(&cur[i], dec[i]), j};
-    sorted &= j == 0 || q[j - 1].key < q[j].key;
-    j++;
+  int fl = 0, sorted = 1;
+#pragma omp parallel for schedule(static) reduction(| : fl) reduction(& : sorted) \
+    if (nch > 1) num_threads(s->threads)
+  for (int64_t c = 0; c < nch; c++) {
+    const int64_t hi = (c + 1) * CHUNK < n ? (c + 1) * CHUNK : n;
+    for (int64_t i = c * CHUNK, j = cnt[c][3]; i < hi; i++) {
+      const int32_t id = dec[i] == C_SPLIT_R ? cur[i].r : dec[i] == C_SPLIT_S ? cur[i].s : -1;
+      fl |= (dec[i] == C_ELEM ? ELEM_LINKS : 0) |
+            (id >= 0 && s->el[id].child < 0 ? ELEM_SPLITS : 0);
+      const int nk = kid_count(&cur[i], dec[i]);
+      if (nk == 0 || j >= m) continue;
+      q[j] = (scan_rec){pos[i], nk, j};
+      sorted &= j == 0 || j == cnt[c][3] || q[j - 1].key < q[j].key;
+      j++;
+    }
   }
+  /* across the chunks' seams */
+  for (int64_t c = 1; c < nch && sorted; c++)
+    if (cnt[c][3] > 0 && cnt[c][3] < m) sorted &= q[cnt[c][3] - 1].key < q[cnt[c][3]].key;
   /* in key order: k, v, and in 'fr' the index each came from (sorted in chunks, merged) */
   int64_t *fr = sorted ? NULL : malloc((size_t)(m > 0 ? m : 1) * sizeof *fr);
   if (st == HR_OK && !sorted && !fr) st = nomem(err), m = 0;
@@ -1674,7 +1683,8 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
       free(spare), free(spare_pos);
       spare = NULL, spare_pos = NULL, spare_cap = 0;
     }
-    if ((st = places(s, cur, cpos, ncur, dec, &ex, &tot, &what, st, err)) != HR_OK) {
+    if ((st = places(s, cur, cpos, ncur, dec, (const int64_t(*)[4])cnt, &ex, &tot, &what, st,
+                     err)) != HR_OK) {
       free(dec), free(cnt), free(ex);
       break;
     }
@@ -1780,6 +1790,9 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
 /* What link l brings its receiver: to G, Gu and Gf of an element, or to a cluster's field L. */
 static inline void gather_link(hr_solver *s, const clink *l) {
   hr_clusters *cl = s->cl;
+  /* nothing to add (57% of the conference room's cluster links: hidden); the sums are the same
+   * bit for bit without them (x + 0 B == x for finite B), and the source's B is not read */
+  if (l->F == 0) return;
   double mean, range;
   const double *b = node_b(s, l->s, &mean, &range);
   if (l->r >= 0) {
@@ -2068,3 +2081,4 @@ void hr_cluster_free(hr_clusters **pc) {
   free(cl);
   *pc = NULL;
 }
+

@@ -310,15 +310,20 @@ static int row_push(row *rw, hr_link lij, hr_link lji) {
 /* A link r <- j before any refinement, from the pair's decision and estimated visible
  * fractions h and he: its form factors, the oracle's measures and source shares, no candidate
  * list yet. */
-static hr_link first_link(int32_t r, int32_t j, const hr_ff_elem *gr, const hr_ff_elem *gj,
-                          double h, double he) {
-  double sp;
-  const double f = hr_ff_pair(gr, gj, 0, &sp);
+static hr_link link_of(int32_t r, int32_t j, const hr_ff_elem *gr, const hr_ff_elem *gj,
+                       double f, double sp, double h, double he) {
   hr_link l = {.r = r, .s = j, .F = (float)(f * he), .Fu = (float)f,
                .dF = (float)link_df(gr, gj, f, sp, h), .dS = (float)link_ds(gr, gj, f, h),
                .cand_off = 0, .ncand = NO_LIST};
   source_shares(gr, gj, h == 1, l.w);
   return l;
+}
+
+static hr_link first_link(int32_t r, int32_t j, const hr_ff_elem *gr, const hr_ff_elem *gj,
+                          double h, double he) {
+  double sp;
+  const double f = hr_ff_pair(gr, gj, 0, &sp);
+  return link_of(r, j, gr, gj, f, sp, h, he);
 }
 
 /* Initial pairs all of whose k decision samples are blocked. That leaves a visible fraction
@@ -457,11 +462,28 @@ int hr_link_pair(const hr_solver *s, int32_t i, int32_t j, hr_link *out, int64_t
   const hr_ff_elem gi = hr_elem_geom(s, &s->el[i]), gj = hr_elem_geom(s, &s->el[j]);
   if (!elem_in_front(&gi, &gj) || !elem_in_front(&gj, &gi)) return 0;
   const hr_vf_elem ei = vf_elem(s, i, &gi), ej = vf_elem(s, j, &gj);
-  const double fs = near_fs(&gi, &gj);
+  /* near_fs, with the form factor kept for the link */
+  const int si = gi.area <= gj.area;
+  double sp = 0, f = -1, fs = 0;
+  if (ff_bound_near(si ? &gi : &gj, si ? &gj : &gi) >= HR_VF_LAND_MIN) {
+    f = hr_ff_pair(&gi, &gj, 0, &sp);
+    fs = f_small(&gi, &gj, f);
+    fs = fs >= HR_VF_LAND_MIN ? fs : 0;
+  }
   const double h = pair_h(s, ei, ej, NULL, -1, pair_rays(s), STREAM_DECIDE, fs, NULL, rays);
   if (h == 0) return 0;
-  const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h, fs, NULL, rays);
-  *out = first_link(i, j, &gi, &gj, h, he);
+  if (f < 0) f = hr_ff_pair(&gi, &gj, 0, &sp);
+  /* A pair that cannot refine (neither element splits, now or as a fine source) takes its
+   * visible fraction from the decision samples: the second set guards decisions, and none
+   * depends on these samples but whether the link is made, which keeps the mean unbiased
+   * (E[h; h > 0] = E[h]; independent samples lose the light of the pairs dropped). Half the
+   * rays of such pairs: the conference room 571 M -> 510 M rays, 4.76% -> 4.74% error. */
+  *out = link_of(i, j, &gi, &gj, f, sp, h, h);
+  if (hr_elem_splittable(s, &s->el[i]) || hr_elem_splittable(s, &s->el[j]) ||
+      fine_source(s, out, j)) {
+    const double he = estimate_h(s, ei, ej, NULL, -1, pair_rays(s), h, fs, NULL, rays);
+    out->F = (float)(f * he);
+  }
   return 1;
 }
 
@@ -1458,27 +1480,60 @@ typedef struct gid_key {
   int64_t idx;
 } gid_key;
 
-static int cmp_gid_key(const void *a, const void *b) {
-  const gid_key *x = a, *y = b;
-  return x->gid < y->gid ? -1 : x->gid > y->gid;
+/* Sorts a[0, m) by gid (distinct within a receiver's group: a total order), with t room for
+ * m / 2 keys: halves sorted in turn and merged, short runs by insertion; halves already in
+ * order (most groups after a sweep that added few links) cost one comparison. The conference
+ * room's sorts took 1.14 s of a run instead of 1.56 with qsort and a comparison function. */
+static void sort_gid_keys(gid_key *a, int64_t m, gid_key *t) {
+  if (m <= 16) {
+    for (int64_t i = 1; i < m; i++) {
+      const gid_key x = a[i];
+      int64_t j = i;
+      for (; j > 0 && a[j - 1].gid > x.gid; j--) a[j] = a[j - 1];
+      a[j] = x;
+    }
+    return;
+  }
+  const int64_t h = m / 2;
+  sort_gid_keys(a, h, t);
+  sort_gid_keys(a + h, m - h, t);
+  if (a[h - 1].gid < a[h].gid) return;
+  memcpy(t, a, (size_t)h * sizeof *t);
+  int64_t i = 0, j = h, o = 0;
+  while (i < h && j < m) a[o++] = t[i].gid < a[j].gid ? t[i++] : a[j++];
+  while (i < h) a[o++] = t[i++];
 }
 
 static int sort_by_source(const hr_solver *s, int64_t nrecv, const int64_t *start,
                           int64_t *order) {
   const int64_t n = start[nrecv];
+  int64_t mmax = 0;
+  for (int64_t e = 0; e < nrecv; e++)
+    mmax = start[e + 1] - start[e] > mmax ? start[e + 1] - start[e] : mmax;
   gid_key *k = malloc((size_t)(n > 0 ? n : 1) * sizeof *k);
   if (!k) return 0;
-#pragma omp parallel for schedule(dynamic, 256) if (n > PAR_MIN) num_threads(s->threads)
-  for (int64_t e = 0; e < nrecv; e++) {
-    const int64_t a = start[e], m = start[e + 1] - a;
-    if (m < 2) continue;
-    for (int64_t i = a; i < a + m; i++)
-      k[i] = (gid_key){s->el[s->links[order[i]].s].gid, order[i]};
-    qsort(k + a, (size_t)m, sizeof *k, cmp_gid_key);
-    for (int64_t i = a; i < a + m; i++) order[i] = k[i].idx;
+  int ok = 1;
+#pragma omp parallel if (n > PAR_MIN) num_threads(s->threads) reduction(& : ok)
+  {
+    gid_key *t = malloc((size_t)(mmax / 2 + 1) * sizeof *t);
+    ok = t != NULL;
+#pragma omp for schedule(dynamic, 256)
+    for (int64_t e = 0; e < nrecv; e++) {
+      const int64_t a = start[e], m = start[e + 1] - a;
+      if (m < 2 || !t) continue;
+      for (int64_t i = a; i < a + m; i++) {
+        /* the link and its source's record ahead of need: both lie anywhere */
+        if (i + 16 < a + m) __builtin_prefetch(&s->links[order[i + 16]]);
+        if (i + 8 < a + m) __builtin_prefetch(&s->el[s->links[order[i + 8]].s].gid);
+        k[i] = (gid_key){s->el[s->links[order[i]].s].gid, order[i]};
+      }
+      sort_gid_keys(k + a, m, t);
+      for (int64_t i = a; i < a + m; i++) order[i] = k[i].idx;
+    }
+    free(t);
   }
   free(k);
-  return 1;
+  return ok;
 }
 
 /* Counting sort of links[lo, hi) by receiver into 'order' (stable); 'start' gets nel+1 offsets. */
@@ -1502,6 +1557,8 @@ hr_status hr_link_sort(hr_solver *s) {
       s->rstart = st;
       s->nrstart = s->nel;
     }
+    /* the extras' index still holds when no link came or went since it was built */
+    if (s->xfor[0] == s->nlinks && s->xfor[1] == s->nel) return HR_OK;
     int64_t nx = s->nlinks - s->nsorted;
     int64_t *xs = realloc(s->xstart, (size_t)(s->nel + 1) * sizeof *xs);
     int64_t *xi = realloc(s->xidx, (size_t)(nx > 0 ? nx : 1) * sizeof *xi);
@@ -1509,7 +1566,9 @@ hr_status hr_link_sort(hr_solver *s) {
     if (xi) s->xidx = xi;
     if (!xs || !xi) return HR_ERR_NOMEM;
     group_by_receiver(s, s->nsorted, s->nlinks, s->xstart, s->xidx);
-    return sort_by_source(s, s->nel, s->xstart, s->xidx) ? HR_OK : HR_ERR_NOMEM;
+    if (!sort_by_source(s, s->nel, s->xstart, s->xidx)) return HR_ERR_NOMEM;
+    s->xfor[0] = s->nlinks, s->xfor[1] = s->nel;
+    return HR_OK;
   }
   /* Full sort: drop dead links, group by receiver, compact the candidate pool. */
   int64_t n = 0;
@@ -1605,5 +1664,6 @@ hr_status hr_link_sort(hr_solver *s) {
   s->cap_pool = tot > 0 ? tot : 1;
   s->nsorted = n;
   s->sorted = 1;
+  s->xfor[0] = s->xfor[1] = -1;
   return HR_OK;
 }

@@ -128,6 +128,8 @@ struct hr_solver {
   int64_t nsorted, ndead;
   int64_t *xstart, *xidx; /* extras by receiver: xidx[xstart[e]..xstart[e+1]) index links */
   int sorted;             /* 0: a full sort is due */
+  int64_t xfor[2];        /* nlinks and nel when xstart/xidx were built ({-1, -1}: not since
+                             the last full sort) */
   /* For the decision pass, per sorted link: its source and max(dF, dS) rounded up to float (0
    * for dead links). */
   int32_t *ls;
