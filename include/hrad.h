@@ -248,7 +248,7 @@ typedef struct hr_options {
   double bf_factor;   /* BF_e is divided by this each outer step (> 1) */
   double area_min;    /* A_e, relative to the total scene area; 0: equal to bf_low */
   double b_eps;       /* B_e: convergence when the max change of B, relative to the scene's mean
-                         radiosity, is below */
+                         radiosity, is below; 0: equal to bf_low (at most b_max) */
   double b_max;       /* B_max of section 2.2.4 (relative like b_eps), > b_eps */
   int relax;          /* section 2.2.4 relaxed inner loop on/off */
   int relax_links;    /* "many new links": relative growth threshold in percent */

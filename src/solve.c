@@ -35,7 +35,7 @@ void hr_options_default(hr_options *o) {
    * the same error on every scene measured (docs/design.md, "Algorithm details") */
   o->bf_factor = 50.0;
   o->area_min = 0; /* follows bf_low */
-  o->b_eps = 1e-4;
+  o->b_eps = 0; /* follows bf_low */
   o->b_max = 2e-3;
   o->relax = 1;
   o->relax_links = 5;
@@ -74,8 +74,10 @@ static hr_status check_options(const hr_options *o, hr_err *err) {
   if (!(o->bf_factor > 1)) return hr_err_set(err, HR_ERR_INVALID, "--bf-factor must be > 1");
   if (!(o->area_min >= 0 && o->area_min < 1))
     return hr_err_set(err, HR_ERR_INVALID, "--area-min must be in [0, 1) (0: BF_low)");
-  if (!(o->b_eps > 0)) return hr_err_set(err, HR_ERR_INVALID, "--b-eps must be > 0");
-  if (!(o->b_max >= o->b_eps)) return hr_err_set(err, HR_ERR_INVALID, "--b-max must be >= --b-eps");
+  if (!(o->b_eps >= 0))
+    return hr_err_set(err, HR_ERR_INVALID, "--b-eps must be >= 0 (0: BF_low)");
+  if (!(o->b_max > 0 && o->b_max >= o->b_eps))
+    return hr_err_set(err, HR_ERR_INVALID, "--b-max must be > 0 and >= --b-eps");
   if (o->rays < 1 || o->rays > 4096)
     return hr_err_set(err, HR_ERR_INVALID, "--rays must be in 1..4096");
   if (o->threads < 0 || o->threads > 1024)
@@ -111,6 +113,7 @@ hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solv
   s->opt = o;
   s->area_total = hr_scene_total_area(scene);
   s->area_min = (o.area_min > 0 ? o.area_min : o.bf_low) * s->area_total;
+  s->b_eps = o.b_eps > 0 ? o.b_eps : fmin(o.bf_low, o.b_max);
   s->vf = (hr_vf_ctx){scene, NULL, hr_vis_lift(scene), o.seed};
   s->unit = emitted_mean(scene, s->area_total);
   s->threads = o.threads > 0 ? o.threads : omp_get_num_procs();
@@ -475,13 +478,13 @@ static void advance(hr_solver *s, double change, int64_t nnew, int stop) {
   const int settled = (double)nnew * SETTLE_DIV <= links;
   /* The step after an extrapolation measures how far it jumped, not the contraction: nothing
    * converges on it, and it is the ratio's base for the next one. */
-  int strict = change < o->b_eps && settled && !s->xprev;
+  int strict = change < s->b_eps && settled && !s->xprev;
   if (at_low) {
     const double prev = s->prev_change;
     s->prev_change = settled ? change : 0;
     if (strict && change > 0) {
       const double q = prev > 0 ? change / prev : 1;
-      strict = q < 1 && change * q / (1 - q) < o->b_eps;
+      strict = q < 1 && change * q / (1 - q) < s->b_eps;
     }
   }
   int level_done = strict;

@@ -86,6 +86,7 @@ struct hr_solver {
                          emitted radiosity */
   double area_total;
   double area_min;    /* A_e in scene units */
+  double b_eps;       /* B_eps in effect (hr_options.b_eps, or BF_low at most B_max) */
   /* elements */
   hr_elem *el;
   int64_t nel, cap_el;

@@ -48,12 +48,14 @@ static void furnace(void) {
   }
   /* White walls: rho 0.95 -> B = 20. Each bounce absorbs only 5%, so the iteration contracts
    * slowly (q = 0.95) and a run that stopped when one step fell below B_eps would be about
-   * 20 steps short; the test at BF_low estimates the error left (see advance in solve.c). */
+   * 20 steps short; the test at BF_low estimates the error left (see advance in solve.c). B_eps
+   * 1e-4, a tenth of the default (BF_low), so that stopping on the step would fail the test. */
   {
     hr_scene *w = furnace_box(0.95, 1, 0);
     hr_options o;
     hr_options_default(&o);
     o.extrapolate = 0;
+    o.b_eps = 1e-4;
     hr_solver *sw = t_solve(w, &o);
     check_all_polys(sw, w, 20.0, 5e-4, "white box, rho 0.95 (5e-4; 1.6e-3 stopping on the step)");
     hr_stats plain;

@@ -807,7 +807,8 @@ static void usage(void) {
       "  --bf-factor X        BF_e is divided by X per level (> 1, default %g)\n"
       "  --area-min X         minimum element area A_e, relative to the total area\n"
       "                       (0 <= X < 1, default 0: equal to BF_low)\n"
-      "  --b-eps X            convergence: max change of B below X (> 0, default %g)\n"
+      "  --b-eps X            convergence: max change of B below X (>= 0, default 0:\n"
+      "                       equal to BF_low, at most B_max)\n"
       "  --b-max X            B_max of the relaxed inner loop (>= B_eps, default %g)\n"
       "  --no-relax           rigid inner loop (paper Figure 3) instead of section 2.2.4\n"
       "  --no-extrapolate     plain Jacobi iterations, without the Aitken extrapolation\n"
@@ -826,7 +827,7 @@ static void usage(void) {
       "Exit status: 0 done, 1 bad input or a failure (nothing written), 2 usage error;\n"
       "interrupted by a signal: 128+N (Ctrl-C: 130; a second Ctrl-C stops at once).\n",
       scenes, MIN_SIDE, MAX_SIDE, MAX_PIXELS, CKPT_EVERY, MIN_EMIT, MAX_EMIT, d.bf_low, d.bf_start,
-      d.bf_factor, d.b_eps, d.b_max, d.rays, (unsigned long long)d.seed, MAX_THREADS, INT_MAX,
+      d.bf_factor, d.b_max, d.rays, (unsigned long long)d.seed, MAX_THREADS, INT_MAX,
       d.max_iters, d.max_links);
 }
 
@@ -1077,7 +1078,8 @@ static void parse_args(cli *c, int argc, char **argv) {
         die_usage("--area-min must be in [0, 1) (0: BF_low), got '%s'", v);
     } else if (!strcmp(a, "--b-eps")) {
       const char *v = NEXT();
-      if (!((o->b_eps = parse_real(a, v)) > 0)) die_usage("--b-eps must be > 0, got '%s'", v);
+      if (!((o->b_eps = parse_real(a, v)) >= 0))
+        die_usage("--b-eps must be >= 0 (0: BF_low), got '%s'", v);
     } else if (!strcmp(a, "--b-max")) {
       const char *v = NEXT();
       if (!((o->b_max = parse_real(a, v)) > 0)) die_usage("--b-max must be > 0, got '%s'", v);
