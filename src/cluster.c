@@ -1538,6 +1538,61 @@ static int kid_count(const clink *l, int dec) {
  * the splitting links, not all: in a sweep over the conference room's 22 M links that keep,
  * arrays for every link (56 bytes each, a first touch of every page) set the peak memory. */
 enum { ELEM_LINKS = 1, ELEM_SPLITS = 2 };
+
+/* places in one process when the splitting links' keys lie in a range no longer than twice the
+ * links (a round's children hold consecutive places): the prefix sums in key order from a table
+ * of the kid counts by key, without sorting. The table holds, in blocks of PBLOCK keys, each
+ * key's offset within its block (at most 16 kids a link: within 16 bits). 0 when the range is
+ * too wide or memory is short (the caller then sorts). */
+#define PBLOCK 2048
+static int places_dense(const scan_rec *q, int64_t m, int64_t n, int64_t kmin, int64_t kmax,
+                        int64_t *ex, int64_t *tot, int threads) {
+  if (m == 0 || kmax - kmin >= 2 * n + CHUNK) return 0;
+  const int64_t range = kmax - kmin + 1, nb = (range + PBLOCK - 1) / PBLOCK;
+  uint16_t *t = calloc((size_t)range, sizeof *t);
+  int64_t *bs = malloc((size_t)(nb + 1) * sizeof *bs);
+  if (!t || !bs) {
+    free(t), free(bs);
+    return 0;
+  }
+#pragma omp parallel num_threads(threads) if (m > PAR_MIN)
+  {
+#pragma omp for schedule(static)
+    for (int64_t j = 0; j < m; j++) {
+      assert(q[j].v > 0 && q[j].v <= 16);
+      t[q[j].key - kmin] = (uint16_t)q[j].v;
+    }
+#pragma omp for schedule(static)
+    for (int64_t b = 0; b < nb; b++) {
+      const int64_t hi = (b + 1) * PBLOCK < range ? (b + 1) * PBLOCK : range;
+      uint32_t acc = 0;
+      for (int64_t o = b * PBLOCK; o < hi; o++) {
+        const uint32_t x = t[o];
+        t[o] = (uint16_t)acc;
+        acc += x;
+      }
+      bs[b] = acc;
+    }
+#pragma omp single
+    {
+      int64_t acc = 0;
+      for (int64_t b = 0; b < nb; b++) {
+        const int64_t x = bs[b];
+        bs[b] = acc;
+        acc += x;
+      }
+      *tot = acc;
+    }
+#pragma omp for schedule(static)
+    for (int64_t j = 0; j < m; j++) {
+      const int64_t o = q[j].key - kmin;
+      ex[q[j].from] = bs[o / PBLOCK] + t[o];
+    }
+  }
+  free(t), free(bs);
+  return 1;
+}
+
 static hr_status places(hr_solver *s, const clink *cur, const int64_t *pos, int64_t n,
                         const uint8_t *dec, const int64_t (*cnt)[4], int64_t **ex, int64_t *tot,
                         int *what, hr_status st, hr_err *err) {
@@ -1552,8 +1607,9 @@ static hr_status places(hr_solver *s, const clink *cur, const int64_t *pos, int6
   if (st == HR_OK && (!q || !k || !v || !e || !*ex)) st = nomem(err);
   if (st != HR_OK) m = 0;
   int fl = 0, sorted = 1;
+  int64_t kmin = INT64_MAX, kmax = INT64_MIN;
 #pragma omp parallel for schedule(static) reduction(| : fl) reduction(& : sorted) \
-    if (nch > 1) num_threads(s->threads)
+    reduction(min : kmin) reduction(max : kmax) if (nch > 1) num_threads(s->threads)
   for (int64_t c = 0; c < nch; c++) {
     const int64_t hi = (c + 1) * CHUNK < n ? (c + 1) * CHUNK : n;
     for (int64_t i = c * CHUNK, j = cnt[c][3]; i < hi; i++) {
@@ -1564,8 +1620,14 @@ static hr_status places(hr_solver *s, const clink *cur, const int64_t *pos, int6
       if (nk == 0 || j >= m) continue;
       q[j] = (scan_rec){pos[i], nk, j};
       sorted &= j == 0 || j == cnt[c][3] || q[j - 1].key < q[j].key;
+      kmin = pos[i] < kmin ? pos[i] : kmin, kmax = pos[i] > kmax ? pos[i] : kmax;
       j++;
     }
+  }
+  if (!s->dist && st == HR_OK && places_dense(q, m, n, kmin, kmax, *ex, tot, s->threads)) {
+    *what = fl;
+    free(q), free(k), free(v), free(e);
+    return st;
   }
   /* across the chunks' seams */
   for (int64_t c = 1; c < nch && sorted; c++)
