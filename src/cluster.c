@@ -2143,4 +2143,3 @@ void hr_cluster_free(hr_clusters **pc) {
   free(cl);
   *pc = NULL;
 }
-

@@ -418,12 +418,14 @@ static int init_flush(const hr_solver *s, int i, const hr_ff_elem *gi, pending *
   return 1;
 }
 
-/* f_small of pair (i, j) where it may reach HR_VF_LAND_MIN (the quadrature only then), else 0. */
-static double near_fs(const hr_ff_elem *gi, const hr_ff_elem *gj) {
+/* f_small of pair (i, j) where it may reach HR_VF_LAND_MIN (the quadrature only then), else 0;
+ * the pair's form factor and spread in *f and *sp where computed (*f = -1 otherwise). */
+static double near_fs(const hr_ff_elem *gi, const hr_ff_elem *gj, double *f, double *sp) {
+  *f = -1; /* not computed: the pair is far */
   const int si = gi->area <= gj->area;
   if (ff_bound_near(si ? gi : gj, si ? gj : gi) < HR_VF_LAND_MIN) return 0;
-  double sp;
-  const double fs = f_small(gi, gj, hr_ff_pair(gi, gj, 0, &sp));
+  *f = hr_ff_pair(gi, gj, 0, sp);
+  const double fs = f_small(gi, gj, *f);
   return fs >= HR_VF_LAND_MIN ? fs : 0;
 }
 
@@ -450,7 +452,8 @@ static void init_row(const hr_solver *s, int i, row *rw) {
     }
     int q = pd.n++;
     pd.j[q] = j, pd.k[q] = k, pd.g[q] = gj;
-    pd.fs[q] = near_fs(&gi, &gj);
+    double f, sp;
+    pd.fs[q] = near_fs(&gi, &gj, &f, &sp);
     pd.segs += k;
   }
   init_flush(s, i, &gi, &pd, &blk, rw);
@@ -462,14 +465,8 @@ int hr_link_pair(const hr_solver *s, int32_t i, int32_t j, hr_link *out, int64_t
   const hr_ff_elem gi = hr_elem_geom(s, &s->el[i]), gj = hr_elem_geom(s, &s->el[j]);
   if (!elem_in_front(&gi, &gj) || !elem_in_front(&gj, &gi)) return 0;
   const hr_vf_elem ei = vf_elem(s, i, &gi), ej = vf_elem(s, j, &gj);
-  /* near_fs, with the form factor kept for the link */
-  const int si = gi.area <= gj.area;
-  double sp = 0, f = -1, fs = 0;
-  if (ff_bound_near(si ? &gi : &gj, si ? &gj : &gi) >= HR_VF_LAND_MIN) {
-    f = hr_ff_pair(&gi, &gj, 0, &sp);
-    fs = f_small(&gi, &gj, f);
-    fs = fs >= HR_VF_LAND_MIN ? fs : 0;
-  }
+  double f, sp = 0; /* the pair's form factor where near_fs computed it (f >= 0) */
+  const double fs = near_fs(&gi, &gj, &f, &sp);
   const double h = pair_h(s, ei, ej, NULL, -1, pair_rays(s), STREAM_DECIDE, fs, NULL, rays);
   if (h == 0) return 0;
   if (f < 0) f = hr_ff_pair(&gi, &gj, 0, &sp);
