@@ -484,6 +484,9 @@ static int box_behind(const hr_surface *f, hr_vec3 lo, hr_vec3 hi, double tol) {
   return 1;
 }
 
+/* Draws a link's point pairs in batches of this many (see draw). */
+#define DRAW_BATCH 8
+
 /* Which surface of cluster id (its place k in perm) takes the point at u0 in [0, 1) of its
  * area: the last k in [lo, hi) with cum[k] <= t (cum[lo] <= t always), without branches. -1 for
  * an element. */
@@ -499,6 +502,27 @@ static int32_t node_locate(const hr_solver *s, int32_t id, double u0) {
     len -= h;
   }
   return lo;
+}
+
+/* node_locate for the n draws u[b][c] (b < n) at once, into k: the searches of one node take the
+ * same steps, and run side by side so that their loads overlap instead of each waiting for the
+ * one before (a large cluster's search is a chain of cache misses). */
+static void locate_batch(const hr_solver *s, int32_t id, const double (*u)[6], int c, int n,
+                         int32_t *k) {
+  if (id >= 0) {
+    for (int b = 0; b < n; b++) k[b] = -1;
+    return;
+  }
+  const hr_clusters *cl = s->cl;
+  const cnode *nd = &cl->node[-1 - id];
+  const double c0 = cl->cum[nd->lo], span = cl->cum[nd->hi] - c0;
+  double t[DRAW_BATCH];
+  for (int b = 0; b < n; b++) t[b] = c0 + u[b][c] * span, k[b] = nd->lo;
+  for (int32_t len = nd->hi - nd->lo; len > 1;) {
+    const int32_t h = len / 2;
+    for (int b = 0; b < n; b++) k[b] = cl->cum[k[b] + h] <= t[b] ? k[b] + h : k[b];
+    len -= h;
+  }
 }
 
 /* The point of node id at u (u[0] chose place k of its surfaces: node_locate) and its normal. */
@@ -564,7 +588,6 @@ static int link_rays(const hr_solver *s) {
  * hr_vf_pair: where the facing parts are small, k draws often found none, and such links
  * carried nothing although exact quadrature gave them light: museum 1.5% dark). Returns how
  * many face each other, and in *ndraw how many were drawn. */
-#define DRAW_BATCH 8
 static int draw(const hr_solver *s, int32_t r, int32_t sn, int k, int stream, double reg,
                 double *w, float *org, float *dst, int *ndraw) {
   const uint64_t key = hr_hash4(s->opt.seed, node_gid(s, r), node_gid(s, sn), 11 + stream);
@@ -578,11 +601,9 @@ static int draw(const hr_solver *s, int32_t r, int32_t sn, int k, int stream, do
   for (int b = DRAW_BATCH; q < 8 * k && m < k; q++, b++) {
     if (b == DRAW_BATCH) {
       const int nb = 8 * k - q < DRAW_BATCH ? 8 * k - q : DRAW_BATCH;
-      for (b = 0; b < nb; b++) {
-        six_units(key, (uint64_t)(q + b), u[b]);
-        kr[b] = node_locate(s, r, u[b][0]), ks[b] = node_locate(s, sn, u[b][3]);
-        prefetch_surface(s, kr[b]), prefetch_surface(s, ks[b]);
-      }
+      for (b = 0; b < nb; b++) six_units(key, (uint64_t)(q + b), u[b]);
+      locate_batch(s, r, u, 0, nb, kr), locate_batch(s, sn, u, 3, nb, ks);
+      for (b = 0; b < nb; b++) prefetch_surface(s, kr[b]), prefetch_surface(s, ks[b]);
       b = 0;
     }
     hr_vec3 nx, ny;
@@ -752,24 +773,39 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn, double
   /* hr_ff_pair's sums, with each surface's geometry and each receiver's points of an order
    * made once */
   hr_ff_elem gs[EXACT_PAIRS];
-  for (int j = 0; j < ns; j++) gs[j] = hr_elem_geom(s, &s->el[es[j]]);
+  hr_ff_shape hs[EXACT_PAIRS];
+  for (int j = 0; j < ns; j++)
+    gs[j] = hr_elem_geom(s, &s->el[es[j]]), hs[j] = hr_ff_shape_of(&gs[j]);
   /* the children's surfaces: receivers i < n0 and sources j < m0 are their first child's */
   const int n0 = r < 0 ? first_child_count(s, r) : nr, m0 = sn < 0 ? first_child_count(s, sn) : ns;
   double f = 0, ar = 0, fk[2][2] = {{0, 0}, {0, 0}}, ak[2] = {0, 0};
+  /* one receiver's (point, source) pairs, evaluated four at a time whatever their sources
+   * (a pair at one point filled one lane of four: 37% of the kernel's calls on the conference
+   * room), then summed pair by pair in hr_ff_pair's order */
+  const hr_vec3 *px[EXACT_PAIRS * 9];
+  const hr_ff_elem *ps[EXACT_PAIRS * 9];
+  double fx[EXACT_PAIRS * 9];
+  int8_t oj[EXACT_PAIRS];
   for (int i = 0; i < nr; i++) {
     const hr_ff_elem gi = hr_elem_geom(s, &s->el[er[i]]);
+    const hr_ff_shape hi = hr_ff_shape_of(&gi);
     hr_vec3 x[3][9];
     double w[3][9], fi = 0, fs[2] = {0, 0};
-    int np[3] = {-1, -1, -1};
+    int np[3] = {-1, -1, -1}, nq = 0;
     for (int j = 0; j < ns; j++) {
       /* half of the pairs in clustered museum, and three quarters of the points (they take
        * the highest order, since one reaches behind the other) */
-      if (hr_ff_pair_dark(&gi, &gs[j])) continue;
-      const int o = hr_ff_order(&gi, &gs[j]) - 1;
+      const int o = oj[j] = (int8_t)(hr_ff_pair_class(&gi, &gs[j], &hi, &hs[j]) - 1);
+      if (o < 0) continue;
       if (np[o] < 0) np[o] = hr_ff_points(&gi, o + 1, x[o], w[o]);
-      double fij = 0, fx[9];
-      hr_ff_point_many(x[o], np[o], gi.n, &gs[j], fx);
-      for (int k = 0; k < np[o]; k++) fij += w[o][k] * fx[k];
+      for (int k = 0; k < np[o]; k++) px[nq] = &x[o][k], ps[nq++] = &gs[j];
+    }
+    hr_ff_point_pairs(px, ps, nq, gi.n, fx);
+    for (int j = 0, q = 0; j < ns; j++) {
+      const int o = oj[j];
+      if (o < 0) continue;
+      double fij = 0;
+      for (int k = 0; k < np[o]; k++) fij += w[o][k] * fx[q++];
       fi += fij;
       fs[j >= m0] += fij;
     }
@@ -1433,6 +1469,10 @@ static int decide(const hr_solver *s, clink *l, double bf_e) {
   const double b = mean * kv_of(l) + range;
   if (l->r < 0 && !recv_whole(s, l)) lim = 0;
   if (rho * l->fb * b <= lim) return rho * l->fb * b <= 0.25 * lim ? C_WEAK : C_KEEP;
+  /* A link decided in an earlier sweep has its unoccluded value: the test on it needs none of
+   * the geometry below (whose two node records were 5% of a late sweep's profile). */
+  if (l->fu2 >= 0 && l->fu2 < l->fb && rho * l->fu2 * b <= lim)
+    return rho * l->fu2 * b <= 0.25 * lim ? C_WEAK : C_KEEP;
   hr_vec3 cr, cs;
   double rr, rs, ar, as;
   node_sphere(s, l->r, &cr, &rr, &ar);

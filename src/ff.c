@@ -134,88 +134,143 @@ AVX2_ATTR static inline __m256d edge4(__m256d ux, __m256d uy, __m256d uz, __m256
   return _mm256_and_pd(term, _mm256_cmp_pd(cl, _mm256_setzero_pd(), _CMP_GT_OQ));
 }
 
-/* hr_ff_point on four lanes. Where the source straddles a point's tangent plane, the clipped
- * polygon's edges in hr_ff_point's order: for each corner k, (a_k, its successor) if a_k is in
- * front, then (I_k, its successor) if edge k crosses the plane at I_k; a corner's successor is
- * I_k where edge k leaves, else a_k+1; an exit's is the entry point. A lane whose polygon crosses
- * the plane other than twice (rounding, near-degenerate corners) goes to hr_ff_point itself. */
+/* Four lanes' sources: corners (nv of them; a triangle among quads repeats its first corner as
+ * its fourth, which adds a zero-length edge, +0, to its sum) and front normals. */
+typedef struct src4 {
+  __m256d px[4], py[4], pz[4], nx, ny, nz;
+} src4;
+
+/* hr_ff_point on four lanes (points X, Y, Z, each with its lane's source in S). Where a source
+ * straddles a point's tangent plane, the clipped polygon's edges in hr_ff_point's order: for
+ * each corner k, (a_k, its successor) if a_k is in front, then (I_k, its successor) if edge k
+ * crosses the plane at I_k; a corner's successor is I_k where edge k leaves, else a_k+1; an
+ * exit's is the entry point. A lane whose polygon crosses the plane other than twice (rounding,
+ * near-degenerate corners) is set in *mscalar, for hr_ff_point itself. */
+AVX2_ATTR static inline __m256d lanes_ff(__m256d X, __m256d Y, __m256d Z, const src4 *S, int nv,
+                                         __m256d nxx, __m256d nxy, __m256d nxz, int *mscalar) {
+  const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1);
+  /* in front of the source's plane */
+  const __m256d ox = _mm256_sub_pd(X, S->px[0]), oy = _mm256_sub_pd(Y, S->py[0]),
+                oz = _mm256_sub_pd(Z, S->pz[0]);
+  const __m256d front =
+      _mm256_cmp_pd(dot4(ox, oy, oz, S->nx, S->ny, S->nz), zero, _CMP_GT_OQ);
+  __m256d ax[4], ay[4], az[4], d[4], in[4], all = front, any = zero;
+  for (int k = 0; k < nv; k++) {
+    ax[k] = _mm256_sub_pd(S->px[k], X);
+    ay[k] = _mm256_sub_pd(S->py[k], Y);
+    az[k] = _mm256_sub_pd(S->pz[k], Z);
+    d[k] = dot4(ax[k], ay[k], az[k], nxx, nxy, nxz);
+    in[k] = _mm256_cmp_pd(d[k], zero, _CMP_GT_OQ);
+    all = _mm256_and_pd(all, in[k]), any = _mm256_or_pd(any, in[k]);
+  }
+  const __m256d lit = _mm256_and_pd(front, any); /* lanes with something in front */
+  const int mall = _mm256_movemask_pd(all), mlit = _mm256_movemask_pd(lit);
+  __m256d sum = zero;
+  *mscalar = 0;
+  if (mlit & ~mall) { /* some lane's source is clipped */
+    __m256d ix[4], iy[4], iz[4], cross[4], ncross = zero, ex = zero, ey = zero, ez = zero;
+    for (int k = 0; k < nv; k++) {
+      const int k1 = k + 1 == nv ? 0 : k + 1;
+      cross[k] = _mm256_xor_pd(in[k], in[k1]);
+      ncross = _mm256_add_pd(ncross, _mm256_and_pd(cross[k], one));
+      const __m256d t = _mm256_div_pd(d[k], _mm256_sub_pd(d[k], d[k1]));
+      ix[k] = _mm256_add_pd(ax[k], _mm256_mul_pd(_mm256_sub_pd(ax[k1], ax[k]), t));
+      iy[k] = _mm256_add_pd(ay[k], _mm256_mul_pd(_mm256_sub_pd(ay[k1], ay[k]), t));
+      iz[k] = _mm256_add_pd(az[k], _mm256_mul_pd(_mm256_sub_pd(az[k1], az[k]), t));
+      const __m256d entry = _mm256_andnot_pd(in[k], cross[k]);
+      ex = _mm256_blendv_pd(ex, ix[k], entry), ey = _mm256_blendv_pd(ey, iy[k], entry);
+      ez = _mm256_blendv_pd(ez, iz[k], entry);
+    }
+    *mscalar = mlit & ~mall &
+               ~_mm256_movemask_pd(_mm256_cmp_pd(ncross, _mm256_set1_pd(2), _CMP_EQ_OQ));
+    for (int k = 0; k < nv; k++) {
+      const int k1 = k + 1 == nv ? 0 : k + 1;
+      /* (a_k, I_k where the edge crosses, else a_k1) where a_k is in front */
+      __m256d vx = _mm256_blendv_pd(ax[k1], ix[k], cross[k]),
+              vy = _mm256_blendv_pd(ay[k1], iy[k], cross[k]),
+              vz = _mm256_blendv_pd(az[k1], iz[k], cross[k]);
+      sum = _mm256_add_pd(sum, _mm256_and_pd(in[k], edge4(ax[k], ay[k], az[k], vx, vy, vz, nxx,
+                                                          nxy, nxz)));
+      /* (I_k, the entry where a_k is in front, else a_k1) where the edge crosses */
+      vx = _mm256_blendv_pd(ax[k1], ex, in[k]), vy = _mm256_blendv_pd(ay[k1], ey, in[k]);
+      vz = _mm256_blendv_pd(az[k1], ez, in[k]);
+      sum = _mm256_add_pd(sum, _mm256_and_pd(cross[k], edge4(ix[k], iy[k], iz[k], vx, vy, vz,
+                                                             nxx, nxy, nxz)));
+    }
+  } else if (mall) { /* the same edges with no plane crossed, at half the work */
+    for (int k = 0; k < nv; k++) {
+      const int k1 = k + 1 == nv ? 0 : k + 1;
+      sum = _mm256_add_pd(sum,
+                          edge4(ax[k], ay[k], az[k], ax[k1], ay[k1], az[k1], nxx, nxy, nxz));
+    }
+  }
+  __m256d f = _mm256_mul_pd(_mm256_xor_pd(sum, _mm256_set1_pd(-0.0)), _mm256_set1_pd(0.5 / M_PI));
+  return _mm256_and_pd(f, _mm256_and_pd(lit, _mm256_cmp_pd(f, zero, _CMP_GT_OQ)));
+}
+
+/* Points x[b, b + 4) (the first repeated past n) into X, Y, Z. */
+AVX2_ATTR static inline void load_points(const hr_vec3 *const *x, __m256d *X, __m256d *Y,
+                                         __m256d *Z) {
+  *X = _mm256_set_pd(x[3]->x, x[2]->x, x[1]->x, x[0]->x);
+  *Y = _mm256_set_pd(x[3]->y, x[2]->y, x[1]->y, x[0]->y);
+  *Z = _mm256_set_pd(x[3]->z, x[2]->z, x[1]->z, x[0]->z);
+}
+
+/* lanes_ff at the points p[0, 4) (normal nx) into fv; returns the lanes for hr_ff_point. */
+AVX2_ATTR static inline int lanes_at(const hr_vec3 *const *p, const src4 *S, int nv, hr_vec3 nx,
+                                     double *fv) {
+  __m256d X, Y, Z;
+  load_points(p, &X, &Y, &Z);
+  int mscalar;
+  _mm256_storeu_pd(fv, lanes_ff(X, Y, Z, S, nv, _mm256_set1_pd(nx.x), _mm256_set1_pd(nx.y),
+                                _mm256_set1_pd(nx.z), &mscalar));
+  return mscalar;
+}
+
+/* hr_ff_point_many on four lanes: one source for all. */
 AVX2_ATTR static void point_many_avx2(const hr_vec3 *x, int n, hr_vec3 nx, const hr_ff_elem *s,
                                       double *out) {
   const int nv = s->nv;
-  const __m256d zero = _mm256_setzero_pd(), one = _mm256_set1_pd(1);
-  const __m256d nxx = _mm256_set1_pd(nx.x), nxy = _mm256_set1_pd(nx.y), nxz = _mm256_set1_pd(nx.z);
+  src4 S;
+  for (int k = 0; k < nv; k++)
+    S.px[k] = _mm256_set1_pd(s->p[k].x), S.py[k] = _mm256_set1_pd(s->p[k].y),
+    S.pz[k] = _mm256_set1_pd(s->p[k].z);
+  S.nx = _mm256_set1_pd(s->n.x), S.ny = _mm256_set1_pd(s->n.y), S.nz = _mm256_set1_pd(s->n.z);
   for (int b = 0; b < n; b += 4) {
     const int m = n - b < 4 ? n - b : 4;
-    double xs[3][4];
-    for (int l = 0; l < 4; l++) {
-      const hr_vec3 *p = &x[b + (l < m ? l : 0)];
-      xs[0][l] = p->x, xs[1][l] = p->y, xs[2][l] = p->z;
-    }
-    const __m256d X = _mm256_loadu_pd(xs[0]), Y = _mm256_loadu_pd(xs[1]),
-                  Z = _mm256_loadu_pd(xs[2]);
-    /* in front of the source's plane */
-    const __m256d ox = _mm256_sub_pd(X, _mm256_set1_pd(s->p[0].x)),
-                  oy = _mm256_sub_pd(Y, _mm256_set1_pd(s->p[0].y)),
-                  oz = _mm256_sub_pd(Z, _mm256_set1_pd(s->p[0].z));
-    const __m256d front = _mm256_cmp_pd(dot4(ox, oy, oz, _mm256_set1_pd(s->n.x),
-                                             _mm256_set1_pd(s->n.y), _mm256_set1_pd(s->n.z)),
-                                        zero, _CMP_GT_OQ);
-    __m256d ax[4], ay[4], az[4], d[4], in[4], all = front, any = zero;
-    for (int k = 0; k < nv; k++) {
-      ax[k] = _mm256_sub_pd(_mm256_set1_pd(s->p[k].x), X);
-      ay[k] = _mm256_sub_pd(_mm256_set1_pd(s->p[k].y), Y);
-      az[k] = _mm256_sub_pd(_mm256_set1_pd(s->p[k].z), Z);
-      d[k] = dot4(ax[k], ay[k], az[k], nxx, nxy, nxz);
-      in[k] = _mm256_cmp_pd(d[k], zero, _CMP_GT_OQ);
-      all = _mm256_and_pd(all, in[k]), any = _mm256_or_pd(any, in[k]);
-    }
-    const __m256d lit = _mm256_and_pd(front, any); /* lanes with something in front */
-    const int mall = _mm256_movemask_pd(all), mlit = _mm256_movemask_pd(lit);
-    int mscalar = 0;
-    __m256d sum = zero;
-    if (mlit & ~mall) { /* some lane's source is clipped */
-      __m256d ix[4], iy[4], iz[4], cross[4], ncross = zero, ex = zero, ey = zero, ez = zero;
-      for (int k = 0; k < nv; k++) {
-        const int k1 = k + 1 == nv ? 0 : k + 1;
-        cross[k] = _mm256_xor_pd(in[k], in[k1]);
-        ncross = _mm256_add_pd(ncross, _mm256_and_pd(cross[k], one));
-        const __m256d t = _mm256_div_pd(d[k], _mm256_sub_pd(d[k], d[k1]));
-        ix[k] = _mm256_add_pd(ax[k], _mm256_mul_pd(_mm256_sub_pd(ax[k1], ax[k]), t));
-        iy[k] = _mm256_add_pd(ay[k], _mm256_mul_pd(_mm256_sub_pd(ay[k1], ay[k]), t));
-        iz[k] = _mm256_add_pd(az[k], _mm256_mul_pd(_mm256_sub_pd(az[k1], az[k]), t));
-        const __m256d entry = _mm256_andnot_pd(in[k], cross[k]);
-        ex = _mm256_blendv_pd(ex, ix[k], entry), ey = _mm256_blendv_pd(ey, iy[k], entry);
-        ez = _mm256_blendv_pd(ez, iz[k], entry);
-      }
-      mscalar = mlit & ~mall &
-                ~_mm256_movemask_pd(_mm256_cmp_pd(ncross, _mm256_set1_pd(2), _CMP_EQ_OQ));
-      for (int k = 0; k < nv; k++) {
-        const int k1 = k + 1 == nv ? 0 : k + 1;
-        /* (a_k, I_k where the edge crosses, else a_k1) where a_k is in front */
-        __m256d vx = _mm256_blendv_pd(ax[k1], ix[k], cross[k]),
-                vy = _mm256_blendv_pd(ay[k1], iy[k], cross[k]),
-                vz = _mm256_blendv_pd(az[k1], iz[k], cross[k]);
-        sum = _mm256_add_pd(sum, _mm256_and_pd(in[k], edge4(ax[k], ay[k], az[k], vx, vy, vz, nxx,
-                                                            nxy, nxz)));
-        /* (I_k, the entry where a_k is in front, else a_k1) where the edge crosses */
-        vx = _mm256_blendv_pd(ax[k1], ex, in[k]), vy = _mm256_blendv_pd(ay[k1], ey, in[k]);
-        vz = _mm256_blendv_pd(az[k1], ez, in[k]);
-        sum = _mm256_add_pd(sum, _mm256_and_pd(cross[k], edge4(ix[k], iy[k], iz[k], vx, vy, vz,
-                                                               nxx, nxy, nxz)));
-      }
-    } else if (mall) { /* the same edges with no plane crossed, at half the work */
-      for (int k = 0; k < nv; k++) {
-        const int k1 = k + 1 == nv ? 0 : k + 1;
-        sum = _mm256_add_pd(
-            sum, edge4(ax[k], ay[k], az[k], ax[k1], ay[k1], az[k1], nxx, nxy, nxz));
-      }
-    }
-    __m256d f = _mm256_mul_pd(_mm256_xor_pd(sum, _mm256_set1_pd(-0.0)), _mm256_set1_pd(0.5 / M_PI));
-    f = _mm256_and_pd(f, _mm256_and_pd(lit, _mm256_cmp_pd(f, zero, _CMP_GT_OQ)));
+    const hr_vec3 *p[4];
+    for (int l = 0; l < 4; l++) p[l] = &x[b + (l < m ? l : 0)];
     double fv[4];
-    _mm256_storeu_pd(fv, f);
+    const int mscalar = lanes_at(p, &S, nv, nx, fv);
     for (int l = 0; l < m; l++)
       out[b + l] = (mscalar >> l & 1) ? hr_ff_point(x[b + l], nx, s) : fv[l];
+  }
+}
+
+/* hr_ff_point_pairs on four lanes: each lane its own point and source. */
+AVX2_ATTR static void point_pairs_avx2(const hr_vec3 *const *x, const hr_ff_elem *const *s,
+                                       int n, hr_vec3 nx, double *out) {
+  for (int b = 0; b < n; b += 4) {
+    const int m = n - b < 4 ? n - b : 4;
+    const hr_vec3 *p[4];
+    const hr_ff_elem *q[4];
+    int nv = 3;
+    for (int l = 0; l < 4; l++) {
+      p[l] = x[b + (l < m ? l : 0)], q[l] = s[b + (l < m ? l : 0)];
+      nv = q[l]->nv > nv ? q[l]->nv : nv;
+    }
+    src4 S;
+    for (int k = 0; k < nv; k++) {
+      const hr_vec3 *c[4];
+      for (int l = 0; l < 4; l++) c[l] = &q[l]->p[k < q[l]->nv ? k : 0];
+      load_points(c, &S.px[k], &S.py[k], &S.pz[k]);
+    }
+    const hr_vec3 *nn[4] = {&q[0]->n, &q[1]->n, &q[2]->n, &q[3]->n};
+    load_points(nn, &S.nx, &S.ny, &S.nz);
+    double fv[4];
+    const int mscalar = lanes_at(p, &S, nv, nx, fv);
+    for (int l = 0; l < m; l++)
+      out[b + l] = (mscalar >> l & 1) ? hr_ff_point(*x[b + l], nx, s[b + l]) : fv[l];
   }
 }
 #else
@@ -241,6 +296,17 @@ void hr_ff_point_many(const hr_vec3 *x, int n, hr_vec3 nx, const hr_ff_elem *s, 
   }
 #endif
   for (int k = 0; k < n; k++) out[k] = hr_ff_point(x[k], nx, s);
+}
+
+void hr_ff_point_pairs(const hr_vec3 *const *x, const hr_ff_elem *const *s, int n, hr_vec3 nx,
+                       double *out) {
+#if HR_FF_AVX2
+  if (!g_ff_base && __builtin_cpu_supports("avx2")) {
+    point_pairs_avx2(x, s, n, nx, out);
+    return;
+  }
+#endif
+  for (int k = 0; k < n; k++) out[k] = hr_ff_point(*x[k], nx, s[k]);
 }
 
 /* Gauss-Legendre nodes on [0,1] and weights summing to 1, orders 1..3. */
@@ -348,16 +414,30 @@ int hr_ff_pair_dark(const hr_ff_elem *r, const hr_ff_elem *s) {
   return all_behind(r, s) || all_behind(s, r);
 }
 
+hr_ff_shape hr_ff_shape_of(const hr_ff_elem *e) {
+  return (hr_ff_shape){diameter(e), vcentroid(e)};
+}
+
+/* hr_ff_order for a pair that is in front of each other's planes: by the clearance, a lower
+ * bound of the distance between the two polygons, over the receiver's size. */
+static int clearance_order(const hr_ff_shape *rs, const hr_ff_shape *ss) {
+  const double t = (v3_len(v3_sub(rs->c, ss->c)) - 0.5 * (rs->diam + ss->diam)) / rs->diam;
+  return t > 4.0 ? 1 : t > 1.0 ? 2 : 3;
+}
+
 int hr_ff_order(const hr_ff_elem *r, const hr_ff_elem *s) {
   /* Where one element reaches behind the other's plane, the point form factor has a kink or a
    * jump over the receiver: the highest order. */
   if (some_behind(r, s) || some_behind(s, r)) return 3;
-  double dr = diameter(r), ds = diameter(s);
-  double dist = v3_len(v3_sub(vcentroid(r), vcentroid(s)));
-  /* Clearance: a lower bound of the distance between the two polygons, over the receiver's
-   * size. */
-  double t = (dist - 0.5 * (dr + ds)) / dr;
-  return t > 4.0 ? 1 : t > 1.0 ? 2 : 3;
+  const hr_ff_shape rs = hr_ff_shape_of(r), ss = hr_ff_shape_of(s);
+  return clearance_order(&rs, &ss);
+}
+
+int hr_ff_pair_class(const hr_ff_elem *r, const hr_ff_elem *s, const hr_ff_shape *rs,
+                     const hr_ff_shape *ss) {
+  const int brs = corners_behind(r, s), bsr = corners_behind(s, r);
+  if (brs == s->nv || bsr == r->nv) return 0; /* hr_ff_pair_dark */
+  return brs > 0 || bsr > 0 ? 3 : clearance_order(rs, ss); /* hr_ff_order */
 }
 
 /* Point-to-disk estimate of the point form factor at x (normal nx) from source 's' seen as a

@@ -27,6 +27,12 @@ double hr_ff_point(hr_vec3 x, hr_vec3 nx, const hr_ff_elem *s);
  * contraction into fused multiply-adds). This function can't fail. */
 void hr_ff_point_many(const hr_vec3 *x, int n, hr_vec3 nx, const hr_ff_elem *s, double *out);
 
+/* hr_ff_point at n (point x[q], source s[q]) pairs, all points with normal nx, into out[0, n),
+ * bit for bit as hr_ff_point_many (four pairs at a time on CPUs with AVX2, whatever their
+ * sources): for many small sources seen from few points. This function can't fail. */
+void hr_ff_point_pairs(const hr_vec3 *const *x, const hr_ff_elem *const *s, int n, hr_vec3 nx,
+                       double *out);
+
 /* Whether hr_ff_point_many may take its AVX2 kernel (1, the default, where the CPU has it; 0:
  * the scalar loop, for tests). Returns whether it now does. */
 int hr_ff_use_avx2(int allow);
@@ -41,6 +47,20 @@ int hr_ff_pair_dark(const hr_ff_elem *r, const hr_ff_elem *s);
  * that makes the unoccluded polygon-to-polygon form factor of hr_ff_elem_pair accurate for
  * receiver 'r' and source 's'; chosen from their separation relative to the receiver's size. */
 int hr_ff_order(const hr_ff_elem *r, const hr_ff_elem *s);
+
+/* What hr_ff_order reads of an element that does not depend on the other: its diameter and
+ * vertex centroid. */
+typedef struct hr_ff_shape {
+  double diam;
+  hr_vec3 c;
+} hr_ff_shape;
+hr_ff_shape hr_ff_shape_of(const hr_ff_elem *e);
+
+/* hr_ff_pair_dark and hr_ff_order at once, with the shapes made once for elements met in many
+ * pairs: 0 where hr_ff_pair_dark(r, s), else hr_ff_order(r, s), the same numbers (each corner
+ * tested against the other's plane once instead of twice). */
+int hr_ff_pair_class(const hr_ff_elem *r, const hr_ff_elem *s, const hr_ff_shape *rs,
+                     const hr_ff_shape *ss);
 
 /* Quadrature points of order 'order' (1..3) on element 'e': up to 9 points 'x' with weights 'w'
  * summing to 1 (area measure). Returns the number of points. */

@@ -186,16 +186,74 @@ static void point_many(void) {
   hr_ff_use_avx2(1);
 }
 
+/* hr_ff_point_pairs against hr_ff_point pair by pair, bit for bit: each lane its own point and
+ * source, triangles and quads mixed in one batch (a triangle among quads takes a fourth corner
+ * equal to its first), sources in front of, across and behind the points' tangent planes,
+ * corners and points in a source's plane among the points. */
+static void point_pairs(void) {
+  const int avx2 = hr_ff_use_avx2(1);
+  printf("hr_ff_point_pairs against hr_ff_point (%s)\n", avx2 ? "AVX2 kernel" : "scalar loop");
+  enum { NS = 7, NX = 40 };
+  int n = 0, differ = 0, lit = 0, zero = 0, mixed = 0;
+  for (int k = 0; k < 1500; k++) {
+    hr_ff_elem src[NS];
+    for (int j = 0; j < NS; j++) {
+      src[j] = rnd_elem(v3_scale(rnd_dir(), 0.2 + 2 * rnd()), rnd_dir(), 0.5 + rnd());
+      if ((k + j) % 3 == 0) { /* a triangle */
+        src[j].nv = 3;
+        hr_vec3 nn = v3_newell(src[j].p, 3);
+        src[j].area = 0.5 * v3_len(nn), src[j].n = v3_norm(nn);
+      }
+    }
+    const hr_ff_elem r = rnd_elem(tv(0, 0, 0), rnd_dir(), 1);
+    hr_vec3 pts[12];
+    double w[9], got[NX];
+    int m = hr_ff_points(&r, 1 + k % 3, pts, w);
+    pts[m++] = src[k % NS].p[0];
+    pts[m++] = v3_add(src[0].p[0], v3_scale(v3_sub(src[0].p[1], src[0].p[0]), 2.5));
+    const hr_vec3 *x[NX];
+    const hr_ff_elem *sp[NX];
+    const int use = 1 + k % NX; /* every count, tails of 1-3 lanes included */
+    for (int q = 0; q < use; q++) {
+      x[q] = &pts[(q * 5 + k) % m], sp[q] = &src[(q * 3 + k / 7) % NS];
+      mixed += q % 4 == 3 && sp[q]->nv != sp[q - 3]->nv;
+    }
+    hr_ff_point_pairs(x, sp, use, r.n, got);
+    for (int q = 0; q < use; q++, n++) {
+      const double want = hr_ff_point(*x[q], r.n, sp[q]);
+      differ += memcmp(&want, &got[q], sizeof want) != 0;
+      lit += want > 0, zero += want == 0;
+    }
+  }
+  printf("  %d pairs, %d lit, %d dark, %d differ, %d batches of triangles and quads\n", n, lit,
+         zero, differ, mixed);
+  CHECK(differ == 0, "%d of %d pairs differ from hr_ff_point", differ, n);
+  CHECK(lit > n / 5 && zero > n / 10 && mixed > 100, "%d lit, %d dark of %d; %d mixed", lit,
+        zero, n, mixed);
+  hr_ff_use_avx2(1);
+}
+
 /* hr_ff_pair_dark: where it says a pair sees nothing, every quadrature point gets exactly 0
  * (random pairs near each other, all orientations; in general position, so no corner lies in
  * the other's plane), and it is not a bound that also takes pairs that exchange light. */
 static void dark_pairs(void) {
-  printf("dark pairs (hr_ff_pair_dark)\n");
-  int dark = 0, lit = 0, n = 0, wrong = 0;
+  printf("dark pairs (hr_ff_pair_dark), and hr_ff_pair_class\n");
+  int dark = 0, lit = 0, n = 0, wrong = 0, cls = 0, orders[4] = {0, 0, 0, 0};
   for (int k = 0; k < 4000; k++, n++) {
     hr_ff_elem r = rnd_elem(tv(0, 0, 0), rnd_dir(), 1);
     hr_ff_elem s = rnd_elem(v3_scale(rnd_dir(), 0.3 + 2 * rnd()), rnd_dir(), 0.5 + rnd());
+    if (k % 3 == 0) { /* a triangle, some of them far: every order */
+      s.nv = 3;
+      const hr_vec3 away = v3_scale(v3_norm(v3_add(s.p[0], s.p[1])), 3.0 * (k % 5));
+      for (int v = 0; v < 3; v++) s.p[v] = v3_add(s.p[v], away);
+      hr_vec3 nn = v3_newell(s.p, 3);
+      s.area = 0.5 * v3_len(nn), s.n = v3_norm(nn);
+    }
     const int d = hr_ff_pair_dark(&r, &s);
+    const hr_ff_shape hr = hr_ff_shape_of(&r), hs = hr_ff_shape_of(&s);
+    const int c = hr_ff_pair_class(&r, &s, &hr, &hs);
+    cls += c != (d ? 0 : hr_ff_order(&r, &s));
+    orders[c]++;
     double fmax = 0;
     for (int order = 1; order <= 3; order++) {
       double sp = 0;
@@ -208,6 +266,11 @@ static void dark_pairs(void) {
   }
   printf("  %d of %d pairs dark, %d of the others lit, %d dark ones with light\n", dark, n, lit,
          wrong);
+  printf("  hr_ff_pair_class: %d dark, orders 1-3: %d %d %d; %d differ\n", orders[0], orders[1],
+         orders[2], orders[3], cls);
+  CHECK(cls == 0, "hr_ff_pair_class differs from hr_ff_pair_dark and hr_ff_order %d times", cls);
+  CHECK(orders[1] > 50 && orders[2] > 50 && orders[3] > 50, "orders %d %d %d", orders[1],
+        orders[2], orders[3]);
   CHECK(wrong == 0, "%d pairs called dark get light", wrong);
   CHECK(dark > n / 5 && dark < 4 * n / 5, "%d of %d pairs dark", dark, n);
   CHECK(lit > (n - dark) / 2, "only %d of %d pairs not dark get light", lit, n - dark);
@@ -298,6 +361,7 @@ int main(void) {
   }
   kernels();
   point_many();
+  point_pairs();
   dark_pairs();
   return t_done("test_ff");
 }
