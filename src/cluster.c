@@ -70,6 +70,8 @@ struct hr_clusters {
   int32_t *perm;
   double *cum;        /* cum[k]: area of perm[0, k) */
   csurf *sp;          /* sp[k]: surface perm[k] */
+  hr_ff_elem *sg;     /* sg[k], sh[k]: surface perm[k]'s geometry and shape for form factors */
+  hr_ff_shape *sh;
   double *srad;       /* per surface: bounding-sphere radius about its centroid */
   double (*nsh)[9];   /* per cluster: N_lm */
   double *rho;        /* per cluster: largest reflectance channel of its surfaces */
@@ -373,6 +375,8 @@ static hr_status build_tree(hr_solver *s, hr_clusters *cl) {
   cl->cum = malloc(((size_t)n + 1) * sizeof *cl->cum);
   cl->srad = malloc((size_t)n * sizeof *cl->srad);
   cl->sp = malloc((size_t)n * sizeof *cl->sp);
+  cl->sg = malloc((size_t)n * sizeof *cl->sg);
+  cl->sh = malloc((size_t)n * sizeof *cl->sh);
   const size_t m = n > 1 ? (size_t)n - 1 : 1;
   cl->node = calloc(m, sizeof *cl->node);
   cl->nsh = malloc(m * sizeof *cl->nsh);
@@ -382,8 +386,8 @@ static hr_status build_tree(hr_solver *s, hr_clusters *cl) {
   cl->blo = calloc(m, sizeof *cl->blo);
   cl->bref = calloc(m, sizeof *cl->bref);
   cl->L = calloc(m, sizeof *cl->L);
-  if (!cen || !cl->perm || !cl->cum || !cl->srad || !cl->sp || !cl->node || !cl->nsh || !cl->rho ||
-      !cl->Bm || !cl->bhi || !cl->blo || !cl->bref || !cl->L) {
+  if (!cen || !cl->perm || !cl->cum || !cl->srad || !cl->sp || !cl->sg || !cl->sh || !cl->node ||
+      !cl->nsh || !cl->rho || !cl->Bm || !cl->bhi || !cl->blo || !cl->bref || !cl->L) {
     free(cen);
     return HR_ERR_NOMEM;
   }
@@ -416,6 +420,7 @@ static hr_status build_tree(hr_solver *s, hr_clusters *cl) {
     memset(q, 0, sizeof *q);
     for (int j = 0; j < f->nverts; j++) q->v[j] = f->v[j];
     q->n = f->normal, q->nv = f->nverts;
+    cl->sg[k] = hr_elem_geom(s, &s->el[cl->perm[k]]), cl->sh[k] = hr_ff_shape_of(&cl->sg[k]);
   }
   summarise(s, cl);
   cl->size = cl->n > 0 ? cl->node[0].rad : cl->srad[0];
@@ -743,15 +748,18 @@ hr_status hr_cluster_prepare(hr_solver *s, hr_err *err) {
  * of 64 made more links split and was slower. */
 #define EXACT_PAIRS 64
 
-/* The surfaces of node id as elements (a cluster's surface roots); at most max, else -1. */
-static int node_elems(const hr_solver *s, int32_t id, int32_t *out, int max) {
+/* The surfaces of node id for form factors: a cluster's, in place order, from cl->sg and sh
+ * (made once), an element's into *g and *h; their count, or -1 when more than max. */
+static int node_geoms(const hr_solver *s, int32_t id, int max, const hr_ff_elem **pg,
+                      const hr_ff_shape **ph, hr_ff_elem *g, hr_ff_shape *h) {
   if (id >= 0) {
-    out[0] = id;
+    *g = hr_elem_geom(s, &s->el[id]), *h = hr_ff_shape_of(g);
+    *pg = g, *ph = h;
     return 1;
   }
   const cnode *nd = &s->cl->node[-1 - id];
   if (nd->hi - nd->lo > max) return -1;
-  for (int32_t k = nd->lo; k < nd->hi; k++) out[k - nd->lo] = s->cl->perm[k];
+  *pg = &s->cl->sg[nd->lo], *ph = &s->cl->sh[nd->lo];
   return nd->hi - nd->lo;
 }
 
@@ -767,15 +775,15 @@ static int first_child_count(const hr_solver *s, int32_t id) {
  * order as those links would compute them: kids[0][c] for (child c of r <- sn), kids[1][c] for
  * (r <- child c of sn), -1 where that side is an element. */
 static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn, double kids[2][2]) {
-  int32_t er[EXACT_PAIRS], es[EXACT_PAIRS];
-  const int nr = node_elems(s, r, er, EXACT_PAIRS), ns = node_elems(s, sn, es, EXACT_PAIRS);
-  if (nr < 0 || ns < 0 || nr * ns > EXACT_PAIRS) return -1;
   /* hr_ff_pair's sums, with each surface's geometry and each receiver's points of an order
    * made once */
-  hr_ff_elem gs[EXACT_PAIRS];
-  hr_ff_shape hs[EXACT_PAIRS];
-  for (int j = 0; j < ns; j++)
-    gs[j] = hr_elem_geom(s, &s->el[es[j]]), hs[j] = hr_ff_shape_of(&gs[j]);
+  const hr_ff_elem *gr, *gs;
+  const hr_ff_shape *hr, *hs;
+  hr_ff_elem ge[2];
+  hr_ff_shape he[2];
+  const int nr = node_geoms(s, r, EXACT_PAIRS, &gr, &hr, &ge[0], &he[0]),
+            ns = node_geoms(s, sn, EXACT_PAIRS, &gs, &hs, &ge[1], &he[1]);
+  if (nr < 0 || ns < 0 || nr * ns > EXACT_PAIRS) return -1;
   /* the children's surfaces: receivers i < n0 and sources j < m0 are their first child's */
   const int n0 = r < 0 ? first_child_count(s, r) : nr, m0 = sn < 0 ? first_child_count(s, sn) : ns;
   double f = 0, ar = 0, fk[2][2] = {{0, 0}, {0, 0}}, ak[2] = {0, 0};
@@ -787,20 +795,19 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn, double
   double fx[EXACT_PAIRS * 9];
   int8_t oj[EXACT_PAIRS];
   for (int i = 0; i < nr; i++) {
-    const hr_ff_elem gi = hr_elem_geom(s, &s->el[er[i]]);
-    const hr_ff_shape hi = hr_ff_shape_of(&gi);
+    const hr_ff_elem *gi = &gr[i];
     hr_vec3 x[3][9];
     double w[3][9], fi = 0, fs[2] = {0, 0};
     int np[3] = {-1, -1, -1}, nq = 0;
     for (int j = 0; j < ns; j++) {
       /* half of the pairs in clustered museum, and three quarters of the points (they take
        * the highest order, since one reaches behind the other) */
-      const int o = oj[j] = (int8_t)(hr_ff_pair_class(&gi, &gs[j], &hi, &hs[j]) - 1);
+      const int o = oj[j] = (int8_t)(hr_ff_pair_class(gi, &gs[j], &hr[i], &hs[j]) - 1);
       if (o < 0) continue;
-      if (np[o] < 0) np[o] = hr_ff_points(&gi, o + 1, x[o], w[o]);
+      if (np[o] < 0) np[o] = hr_ff_points(gi, o + 1, x[o], w[o]);
       for (int k = 0; k < np[o]; k++) px[nq] = &x[o][k], ps[nq++] = &gs[j];
     }
-    hr_ff_point_pairs(px, ps, nq, gi.n, fx);
+    hr_ff_point_pairs(px, ps, nq, gi->n, fx);
     for (int j = 0, q = 0; j < ns; j++) {
       const int o = oj[j];
       if (o < 0) continue;
@@ -809,10 +816,10 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn, double
       fi += fij;
       fs[j >= m0] += fij;
     }
-    f += gi.area * fi;
-    ar += gi.area;
-    fk[0][i >= n0] += gi.area * fi, ak[i >= n0] += gi.area;
-    fk[1][0] += gi.area * fs[0], fk[1][1] += gi.area * fs[1];
+    f += gi->area * fi;
+    ar += gi->area;
+    fk[0][i >= n0] += gi->area * fi, ak[i >= n0] += gi->area;
+    fk[1][0] += gi->area * fs[0], fk[1][1] += gi->area * fs[1];
   }
   if (kids)
     for (int c = 0; c < 2; c++) {
@@ -2176,6 +2183,7 @@ void hr_cluster_free(hr_clusters **pc) {
   hr_clusters *cl = *pc;
   if (!cl) return;
   free(cl->node), free(cl->perm), free(cl->cum), free(cl->sp), free(cl->srad), free(cl->nsh);
+  free(cl->sg), free(cl->sh);
   free(cl->rho);
   free(cl->Bm), free(cl->bhi), free(cl->blo), free(cl->bref), free(cl->L), free(cl->tq);
   free(cl->nsht), free(cl->lray), free(cl->links);
