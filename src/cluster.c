@@ -1569,6 +1569,37 @@ static int kid_count(const clink *l, int dec) {
   return l->r == l->s ? nc * nc : nc;
 }
 
+/* A bound of what decide's keep tests read of each source node: mean + range (kv <= 1), rounded
+ * up to float, elements first (nel of them), then clusters: a small array that stays in cache
+ * while the decisions read sources at random. */
+static float *source_bounds(const hr_solver *s) {
+  const int64_t nel = s->nel, n = nel + s->cl->n;
+  float *bup = malloc((size_t)(n > 0 ? n : 1) * sizeof *bup);
+  if (!bup) return NULL;
+  for (int64_t k = 0; k < n; k++) {
+    double mean, range;
+    node_b(s, k < nel ? (int32_t)k : (int32_t)(-1 - (k - nel)), &mean, &range);
+    const double x = mean + range;
+    const float xf = (float)x;
+    bup[k] = (double)xf < x ? nextafterf(xf, INFINITY) : xf;
+  }
+  return bup;
+}
+
+/* 1 when link l, decided and estimated in an earlier sweep, is surely kept again at bf_e: its
+ * form-factor bound (the smaller of fb and its unoccluded value, which decide tests in turn)
+ * times the source's bound passes, with a margin for the rounding of the products. Most links
+ * of a late sweep pass, without decide reading the two nodes. */
+static int kept_again(const hr_solver *s, const float *bup, const clink *l, double bf_e) {
+  if (!(l->fu2 >= 0 && l->F >= 0 && l->fb >= 0)) return 0;
+  double rho, bref;
+  node_recv(s, l->r, &rho, &bref);
+  if (l->r < 0 && !recv_whole(s, l)) return 0;
+  const double fmin = l->fu2 < l->fb ? l->fu2 : l->fb;
+  const float b = bup[l->s >= 0 ? l->s : s->nel + (-1 - l->s)];
+  return rho * fmin * b <= bf_e * bref * (1 - 1e-9);
+}
+
 /* Links are decided and made in chunks of this many, each chunk's outputs at offsets counted
  * beforehand, so that the work runs in parallel, its order does not depend on threads and no
  * per-link output array is needed. */
@@ -1752,6 +1783,8 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
   int64_t *spare_pos = NULL, spare_cap = 0;
   hr_status st = HR_OK;
   int64_t rays = 0, made = 0;
+  /* the first round's links decided before: most pass a bound (kept_again); NULL: decide all */
+  float *bup = source_bounds(s);
   /* the test hook HRAD_TEST_FAIL=RANK:cluster:ITER: this rank fails within the first round */
   int injected = hr_test_fail(s, HR_PHASE_CLUSTER);
   /* one process: until no link splits; distributed: until none does on any rank, every rank
@@ -1775,7 +1808,11 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
         const int64_t hi = (c + 1) * CHUNK < ncur ? (c + 1) * CHUNK : ncur;
         for (int64_t i = c * CHUNK; i < hi; i++) {
           if (i + PREFETCH_AHEAD < hi) prefetch_source(s, cur[i + PREFETCH_AHEAD].s);
-          const int d = decide(s, &cur[i], bf_e);
+          const int quick = inplace && bup && kept_again(s, bup, &cur[i], bf_e);
+          const int d = quick ? C_KEEP : decide(s, &cur[i], bf_e);
+          /* a true bound (keep and weak are alike for a link estimated before) */
+          assert(!quick || decide(s, &cur[i], bf_e) == C_KEEP ||
+                 decide(s, &cur[i], bf_e) == C_WEAK);
           dec[i] = (uint8_t)d;
           cnt[c + 1][0] += d == C_KEEP || d == C_WEAK;
           cnt[c + 1][1] += d == C_ELEM;
@@ -1880,7 +1917,7 @@ hr_status hr_cluster_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *er
     if (st != HR_OK || tot == 0) break;
   }
   if (cur != cl->links) free(cur), free(cpos);
-  free(spare), free(spare_pos);
+  free(spare), free(spare_pos), free(bup);
   s->rays += rays;
   *nnew += made;
   /* the later rounds' links among the first's */
