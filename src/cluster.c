@@ -1208,20 +1208,19 @@ static hr_status regroup(hr_clusters *cl, int64_t n0, int64_t n, int threads) {
   placed *t = malloc((size_t)m * sizeof *t);
   if (!t) return HR_ERR_NOMEM;
   const int nc = sort_chunks(threads, m);
-  int64_t top[SORT_CHUNKS_MAX]; /* past the last unmerged link of each chunk */
+  int64_t top[SORT_CHUNKS_MAX], bot[SORT_CHUNKS_MAX]; /* each chunk's unmerged links */
 #pragma omp parallel for schedule(static, 1) if (nc > 1) num_threads(nc)
   for (int c = 0; c < nc; c++) {
     const int64_t lo = chunk_lo(m, c, nc), hi = chunk_lo(m, c + 1, nc);
     for (int64_t j = lo; j < hi; j++) t[j] = (placed){cl->pos[n0 + j], cl->links[n0 + j]};
     sort_placed(t + lo, hi - lo);
-    top[c] = hi;
+    bot[c] = lo, top[c] = hi;
   }
   int64_t i = n0 - 1;
   for (int64_t k = n - 1; k > i; k--) {
     int b = -1; /* the chunk whose last link comes last */
     for (int c = 0; c < nc; c++)
-      if (top[c] > chunk_lo(m, c, nc) && (b < 0 || placed_before(&t[top[b] - 1], &t[top[c] - 1])))
-        b = c;
+      if (top[c] > bot[c] && (b < 0 || placed_before(&t[top[b] - 1], &t[top[c] - 1]))) b = c;
     if (b < 0) break; /* all placed: the rest is where it was */
     const placed *x = &t[top[b] - 1];
     if (i >= 0 && link_before(x->l.r, x->pos, cl->links[i].r, cl->pos[i])) {
