@@ -1584,35 +1584,40 @@ static int kid_count(const clink *l, int dec) {
   return l->r == l->s ? nc * nc : nc;
 }
 
-/* A bound of what decide's keep tests read of each source node: mean + range (kv <= 1), rounded
- * up to float, elements first (nel of them), then clusters: a small array that stays in cache
- * while the decisions read sources at random. */
+/* x rounded up to float. */
+static float up(double x) {
+  const float xf = (float)x;
+  return (double)xf < x ? nextafterf(xf, INFINITY) : xf;
+}
+
+/* What decide's keep tests read of each source node, its mean and range (b = mean kv + range),
+ * rounded up to float, elements first (nel of them), then clusters: a small array that stays in
+ * cache while the decisions read sources at random. */
 static float *source_bounds(const hr_solver *s) {
   const int64_t nel = s->nel, n = nel + s->cl->n;
-  float *bup = malloc((size_t)(n > 0 ? n : 1) * sizeof *bup);
+  float *bup = malloc((size_t)(n > 0 ? n : 1) * 2 * sizeof *bup);
   if (!bup) return NULL;
   for (int64_t k = 0; k < n; k++) {
     double mean, range;
     node_b(s, k < nel ? (int32_t)k : (int32_t)(-1 - (k - nel)), &mean, &range);
-    const double x = mean + range;
-    const float xf = (float)x;
-    bup[k] = (double)xf < x ? nextafterf(xf, INFINITY) : xf;
+    bup[2 * k] = up(mean), bup[2 * k + 1] = up(range);
   }
   return bup;
 }
 
 /* 1 when link l, decided and estimated in an earlier sweep, is surely kept again at bf_e: its
- * form-factor bound (the smaller of fb and its unoccluded value, which decide tests in turn)
- * times the source's bound passes, with a margin for the rounding of the products. Most links
- * of a late sweep pass, without decide reading the two nodes. */
+ * form-factor bound (the smaller of fb and its unoccluded value where decide computed one,
+ * which decide tests in turn) times the source's bound passes, with a margin for the rounding
+ * of the products. Most links of a late sweep pass, without decide reading the two nodes. */
 static int kept_again(const hr_solver *s, const float *bup, const clink *l, double bf_e) {
-  if (!(l->fu2 >= 0 && l->F >= 0 && l->fb >= 0)) return 0;
+  /* (fu2: -1 where the bound fb sufficed, and decide tests it first) */
+  if (!(l->F >= 0 && l->fb >= 0 && (l->fu2 >= 0 || l->fu2 == -1))) return 0;
   double rho, bref;
   node_recv(s, l->r, &rho, &bref);
   if (l->r < 0 && !recv_whole(s, l)) return 0;
-  const double fmin = l->fu2 < l->fb ? l->fu2 : l->fb;
-  const float b = bup[l->s >= 0 ? l->s : s->nel + (-1 - l->s)];
-  return rho * fmin * b <= bf_e * bref * (1 - 1e-9);
+  const double fmin = l->fu2 >= 0 && l->fu2 < l->fb ? l->fu2 : l->fb;
+  const float *u = &bup[2 * (l->s >= 0 ? l->s : s->nel + (-1 - l->s))];
+  return rho * fmin * ((double)u[0] * kv_of(l) + u[1]) <= bf_e * bref * (1 - 1e-9);
 }
 
 /* Links are decided and made in chunks of this many, each chunk's outputs at offsets counted
