@@ -1584,12 +1584,6 @@ static int kid_count(const clink *l, int dec) {
   return l->r == l->s ? nc * nc : nc;
 }
 
-/* x rounded up to float. */
-static float up(double x) {
-  const float xf = (float)x;
-  return (double)xf < x ? nextafterf(xf, INFINITY) : xf;
-}
-
 /* What decide's keep tests read of each source node, its mean and range (b = mean kv + range),
  * rounded up to float, elements first (nel of them), then clusters: a small array that stays in
  * cache while the decisions read sources at random. */
@@ -1600,7 +1594,7 @@ static float *source_bounds(const hr_solver *s) {
   for (int64_t k = 0; k < n; k++) {
     double mean, range;
     node_b(s, k < nel ? (int32_t)k : (int32_t)(-1 - (k - nel)), &mean, &range);
-    bup[2 * k] = up(mean), bup[2 * k + 1] = up(range);
+    bup[2 * k] = hr_float_up(mean), bup[2 * k + 1] = hr_float_up(range);
   }
   return bup;
 }

@@ -1194,8 +1194,7 @@ static int64_t decide_all(hr_solver *s, double bf_e, uint8_t *dec, float *bup) {
       x = x > fabs(s->bvar[e]) ? x : fabs(s->bvar[e]);
       for (int k = 0, c = s->el[e].child; c >= 0 && k < 4; k++)
         x = x > fabs(s->bvar[c + k]) ? x : fabs(s->bvar[c + k]);
-      float xf = (float)x;
-      bup[e] = (double)xf < x ? nextafterf(xf, INFINITY) : xf;
+      bup[e] = hr_float_up(x);
     }
     /* rho_max max(B_max, bvar) max(dF, dS)_up bounds both errors of link_err from above; the
      * margin covers the rounding of the products, so the bound never keeps a link that the
@@ -1615,10 +1614,9 @@ hr_status hr_link_sort(hr_solver *s) {
    * were sorted ([0, nsorted)) keep theirs in [0, p). */
   int64_t n = 0, p = 0;
   for (int64_t i = 0; i < s->nlinks; i++) {
-    if (i == s->nsorted) p = n;
     if (s->links[i].Fu >= 0) s->links[n++] = s->links[i];
+    if (i < s->nsorted) p = n;
   }
-  if (s->nsorted >= s->nlinks) p = n;
   s->nlinks = n;
   s->ndead = 0;
   int64_t *st = realloc(s->rstart, (size_t)(s->nel + 1) * sizeof *st);
@@ -1694,11 +1692,9 @@ hr_status hr_link_sort(hr_solver *s) {
   /* the compact copies */
 #pragma omp parallel for schedule(static) if (n > PAR_MIN) num_threads(s->threads)
   for (int64_t k = 0; k < n; k++) {
-    double f = out[k].Fu >= 0 ? (out[k].dF > out[k].dS ? out[k].dF : out[k].dS) : 0;
-    float fu = (float)f;
-    if ((double)fu < f) fu = nextafterf(fu, INFINITY);
+    const double f = out[k].Fu >= 0 ? (out[k].dF > out[k].dS ? out[k].dF : out[k].dS) : 0;
     s->ls[k] = out[k].s;
-    s->lfo[k] = fu;
+    s->lfo[k] = hr_float_up(f);
   }
   /* what the dead links held goes back (a shrinking realloc moves nothing) */
   if (s->cap_links > n + n / 8 + 64) {

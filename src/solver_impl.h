@@ -14,6 +14,7 @@
 #include "vis.h"
 #include "visfrac.h"
 
+#include <math.h>
 #include <stdint.h>
 
 /* Deepest quadtree level: a gid holds the surface in its top 23 bits and the path as a heap index
@@ -29,6 +30,13 @@ typedef struct hr_clusters hr_clusters;
 
 /* Loops shorter than this run on one thread: a parallel region costs more than the work. */
 #define PAR_MIN 100000
+
+/* x rounded up to float: the compact bounds that the refinement oracles test before their exact
+ * tests (link.c, cluster.c) never fall below what they bound. */
+static inline float hr_float_up(double x) {
+  const float xf = (float)x;
+  return (double)xf < x ? nextafterf(xf, INFINITY) : xf;
+}
 
 typedef struct hr_elem {
   uint64_t gid;
