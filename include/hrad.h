@@ -244,7 +244,8 @@ typedef struct hr_options {
   double bf_low;      /* final refinement threshold BF_low: the largest error (variation of the
                          light over the receiver, or from the source's variation) a link may
                          bring its receiver, relative to the light the receiver gets */
-  double bf_start;    /* first BF_e of the multigrid schedule (relative) */
+  double bf_start;    /* first BF_e of the multigrid schedule (relative); 0: equal to bf_low
+                         (one level, the default) */
   double bf_factor;   /* BF_e is divided by this each outer step (> 1) */
   double area_min;    /* A_e, relative to the total scene area; 0: equal to bf_low */
   double b_eps;       /* B_e: convergence when the max change of B, relative to the scene's mean

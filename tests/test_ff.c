@@ -350,7 +350,6 @@ int main(void) {
       hr_options o;
       hr_options_default(&o);
       o.bf_low = bfs[k];
-      o.bf_start = bfs[k] > o.bf_start ? bfs[k] : o.bf_start;
       hr_scene *s = perp ? perp_scene(1, 1, 1) : parallel_scene(1, 1, 1);
       double want = perp ? howell_perp(1, 1, 1) : howell_parallel(1, 1, 1);
       char what[64];

@@ -803,7 +803,8 @@ static void usage(void) {
       "  --bf-low X           accuracy: the largest error a link may bring its receiver,\n"
       "                       relative to the receiver's light; the main quality setting\n"
       "                       (> 0, default %g; smaller is more accurate and slower)\n"
-      "  --bf-start X         first BF_e of the multigrid schedule (>= BF_low, default %g)\n"
+      "  --bf-start X         first BF_e of the multigrid schedule (>= BF_low; default 0:\n"
+      "                       equal to BF_low, one level; the paper's schedule: e.g. 0.05)\n"
       "  --bf-factor X        BF_e is divided by X per level (> 1, default %g)\n"
       "  --area-min X         minimum element area A_e, relative to the total area\n"
       "                       (0 <= X < 1, default 0: equal to BF_low)\n"
@@ -826,7 +827,7 @@ static void usage(void) {
       "\n"
       "Exit status: 0 done, 1 bad input or a failure (nothing written), 2 usage error;\n"
       "interrupted by a signal: 128+N (Ctrl-C: 130; a second Ctrl-C stops at once).\n",
-      scenes, MIN_SIDE, MAX_SIDE, MAX_PIXELS, CKPT_EVERY, MIN_EMIT, MAX_EMIT, d.bf_low, d.bf_start,
+      scenes, MIN_SIDE, MAX_SIDE, MAX_PIXELS, CKPT_EVERY, MIN_EMIT, MAX_EMIT, d.bf_low,
       d.bf_factor, d.b_max, d.rays, (unsigned long long)d.seed, MAX_THREADS, INT_MAX,
       d.max_iters, d.max_links);
 }
@@ -1066,7 +1067,8 @@ static void parse_args(cli *c, int argc, char **argv) {
       if (!((o->bf_low = parse_real(a, v)) > 0)) die_usage("--bf-low must be > 0, got '%s'", v);
     } else if (!strcmp(a, "--bf-start")) {
       const char *v = NEXT();
-      if (!((o->bf_start = parse_real(a, v)) > 0)) die_usage("--bf-start must be > 0, got '%s'", v);
+      if (!((o->bf_start = parse_real(a, v)) >= 0))
+        die_usage("--bf-start must be >= 0, got '%s'", v);
     } else if (!strcmp(a, "--bf-factor")) {
       const char *v = NEXT();
       if (!((o->bf_factor = parse_real(a, v)) > 1))
@@ -1163,8 +1165,8 @@ static void parse_args(cli *c, int argc, char **argv) {
   if (!c->scene_arg) c->scene_arg = "room";
   check_ckpt_paths(c);
   /* the checks of hr_solver_create that relate two options, with its messages */
-  if (!(o->bf_start >= o->bf_low))
-    die_usage("--bf-start must be >= --bf-low (%g < %g)", o->bf_start, o->bf_low);
+  if (!(o->bf_start == 0 || o->bf_start >= o->bf_low))
+    die_usage("--bf-start must be 0 (BF_low) or >= --bf-low (%g < %g)", o->bf_start, o->bf_low);
   if (!(o->b_max >= o->b_eps))
     die_usage("--b-max must be >= --b-eps (%g < %g)", o->b_max, o->b_eps);
   /* the images must fit in memory: the renderer's 2x2 samples (depth, colour, leaf index: 80
