@@ -262,6 +262,9 @@ typedef struct hr_options {
   int cluster;        /* HR_CLUSTER_AUTO, _ON or _OFF: hierarchical clustering (issue 12) */
   int extrapolate;    /* Aitken extrapolation of the leaves' radiosity every few iterations
                          without new links (docs/design.md, "Extrapolation"); default on */
+  double bf_first;    /* BF_e of a clustered solve's linking before the first gather, when
+                         only the emitters have light: the resolution of the direct light
+                         (may be below bf_low); 0: the first level's BF_e (bf_start) */
 } hr_options;
 
 enum { HR_CLUSTER_AUTO = 0, HR_CLUSTER_ON = 1, HR_CLUSTER_OFF = 2 };

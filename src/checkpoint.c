@@ -56,7 +56,8 @@ static uint64_t scene_hash(const hr_scene *sc) {
 /* The options the solution depends on (not threads or max_iters; max_links and cluster only
  * through whether the solver clusters). */
 static uint64_t options_hash(const hr_options *o, int nsurfs) {
-  const double d[] = {o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max};
+  const double d[] = {o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max,
+                      o->bf_first};
   const int64_t n[] = {o->relax, o->relax_links, o->rays, (int64_t)o->seed, o->extrapolate,
                        hr_cluster_wanted(o, nsurfs)};
   return hash_bytes(hash_bytes(0x0b7, d, sizeof d), n, sizeof n);

@@ -96,10 +96,11 @@ hr_status hr_report_json(const char *path, const hr_solver *s, const hr_options 
   fprintf(f, "  \"links_per_s\": %.0f,\n", t.time_s.total > 0 ? t.links / t.time_s.total : 0);
   fprintf(f, "  \"rays_per_s\": %.0f,\n", t.time_s.total > 0 ? t.rays / t.time_s.total : 0);
   fprintf(f,
-          "  \"options\": {\"bf_low\": %g, \"bf_start\": %g, \"bf_factor\": %g, "
-          "\"area_min\": %g, \"b_eps\": %g, \"b_max\": %g, \"relax\": %s, \"rays\": %d, "
-          "\"seed\": %llu, \"extrapolate\": %s, \"cluster\": \"%s\"},\n",
-          o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max,
+          "  \"options\": {\"bf_low\": %g, \"bf_start\": %g, \"bf_first\": %g, "
+          "\"bf_factor\": %g, \"area_min\": %g, \"b_eps\": %g, \"b_max\": %g, "
+          "\"relax\": %s, \"rays\": %d, \"seed\": %llu, \"extrapolate\": %s, "
+          "\"cluster\": \"%s\"},\n",
+          o->bf_low, o->bf_start, o->bf_first, o->bf_factor, o->area_min, o->b_eps, o->b_max,
           o->relax ? "true" : "false", o->rays, (unsigned long long)o->seed,
           o->extrapolate ? "true" : "false",
           o->cluster == HR_CLUSTER_ON ? "on" : o->cluster == HR_CLUSTER_OFF ? "off" : "auto");

@@ -36,6 +36,7 @@ void hr_options_default(hr_options *o) {
    * 4.67% in 0.7 of the time at --bf-low 2e-3 --area-min 1e-3 (docs/design.md, "Algorithm
    * details") */
   o->bf_start = 0;
+  o->bf_first = 0; /* follows bf_start */
   o->bf_factor = 50.0;
   o->area_min = 0; /* follows bf_low */
   o->b_eps = 0; /* follows bf_low */
@@ -68,13 +69,15 @@ static double emitted_mean(const hr_scene *sc, double area) {
 
 static hr_status check_options(const hr_options *o, hr_err *err) {
   const double d[] = {o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max,
-                      o->max_links};
+                      o->max_links, o->bf_first};
   for (size_t k = 0; k < sizeof d / sizeof d[0]; k++)
     if (!isfinite(d[k])) return hr_err_set(err, HR_ERR_INVALID, "options must be finite numbers");
   if (!(o->bf_low > 0)) return hr_err_set(err, HR_ERR_INVALID, "--bf-low must be > 0");
   if (!(o->bf_start == 0 || o->bf_start >= o->bf_low))
     return hr_err_set(err, HR_ERR_INVALID, "--bf-start must be 0 (BF_low) or >= --bf-low");
   if (!(o->bf_factor > 1)) return hr_err_set(err, HR_ERR_INVALID, "--bf-factor must be > 1");
+  if (!(o->bf_first >= 0))
+    return hr_err_set(err, HR_ERR_INVALID, "--bf-first must be >= 0 (0: --bf-start)");
   if (!(o->area_min >= 0 && o->area_min < 1))
     return hr_err_set(err, HR_ERR_INVALID, "--area-min must be in [0, 1) (0: BF_low)");
   if (!(o->b_eps >= 0))

@@ -805,6 +805,9 @@ static void usage(void) {
       "                       (> 0, default %g; smaller is more accurate and slower)\n"
       "  --bf-start X         first BF_e of the multigrid schedule (>= BF_low; default 0:\n"
       "                       equal to BF_low, one level; the paper's schedule: e.g. 0.05)\n"
+      "  --bf-first X         BF_e of a clustered solve's first linking, before any light is\n"
+      "                       gathered: the direct light's resolution (>= 0, may be below\n"
+      "                       BF_low; default 0: the first BF_e)\n"
       "  --bf-factor X        BF_e is divided by X per level (> 1, default %g)\n"
       "  --area-min X         minimum element area A_e, relative to the total area\n"
       "                       (0 <= X < 1, default 0: equal to BF_low)\n"
@@ -1069,6 +1072,10 @@ static void parse_args(cli *c, int argc, char **argv) {
       const char *v = NEXT();
       if (!((o->bf_start = parse_real(a, v)) >= 0))
         die_usage("--bf-start must be >= 0, got '%s'", v);
+    } else if (!strcmp(a, "--bf-first")) {
+      const char *v = NEXT();
+      if (!((o->bf_first = parse_real(a, v)) >= 0))
+        die_usage("--bf-first must be >= 0, got '%s'", v);
     } else if (!strcmp(a, "--bf-factor")) {
       const char *v = NEXT();
       if (!((o->bf_factor = parse_real(a, v)) > 1))
