@@ -182,6 +182,15 @@ for seed in 3 4; do
     && same "$t/kfref" "$t/kf$seed" floor "clustered floor, $np ranks, random assignment $seed" \
     || bad "clustered floor on $np ranks (random:$seed): exit $?"
 done
+# --bf-first: the clustered linking before the first gather at its own BF_e (on floor it
+# changes 81 of 161 k links)
+"$hrad" "${kf[@]}" --threads 1 --bf-first 1e-3 -o "$t/kff1" floor \
+  || bad "plain clustered floor --bf-first run failed"
+[ "$(grep '"links"' "$t/kfref/stats.json")" != "$(grep '"links"' "$t/kff1/stats.json")" ] \
+  || bad "clustered floor: --bf-first 1e-3 changed no link"
+mpi 3 "${kf[@]}" --threads 1 --bf-first 1e-3 -o "$t/kff3" floor \
+  && same "$t/kff1" "$t/kff3" floor "clustered floor, --bf-first 1e-3, 3 ranks" \
+  || bad "clustered floor --bf-first on 3 ranks: exit $?"
 mpi 3 "${k[@]}" --threads 1 --max-iters 6 --checkpoint "$t/kk3.ckpt" -o "$t/kk3" cornell
 mpi 2 "${k[@]}" --threads 1 --resume "$t/kk3.ckpt" -o "$t/kk3r2" cornell \
   && same "$t/k1" "$t/kk3r2" cornell "clustered checkpoint of 3 ranks, resumed on 2" \
