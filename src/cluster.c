@@ -2111,8 +2111,7 @@ hr_status hr_cluster_init(hr_solver *s, hr_err *err) {
   int64_t nnew = 0;
   /* before the first gather only the emitters have light, and every receiver's reference is the
    * floor (node_recv): this sweep sets the direct light's resolution (docs/design.md) */
-  const double bf = s->opt.bf_first > 0 ? s->opt.bf_first : s->opt.bf_start;
-  return hr_cluster_refine(s, bf, &nnew, err);
+  return hr_cluster_refine(s, s->opt.bf_first, &nnew, err);
 }
 
 static int cmp_msg_pos(const void *a, const void *b) {

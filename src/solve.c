@@ -118,6 +118,7 @@ hr_status hr_solver_create(const hr_scene *scene, const hr_options *opt, hr_solv
   s->scene = scene;
   s->opt = o;
   if (!(o.bf_start > 0)) s->opt.bf_start = o.bf_low; /* 0: one level, at BF_low */
+  if (!(o.bf_first > 0)) s->opt.bf_first = s->opt.bf_start; /* 0: the first level's BF_e */
   s->area_total = hr_scene_total_area(scene);
   s->area_min = (o.area_min > 0 ? o.area_min : o.bf_low) * s->area_total;
   s->b_eps = o.b_eps > 0 ? o.b_eps : fmin(o.bf_low, o.b_max);
