@@ -178,22 +178,43 @@ static void source_shares(const hr_ff_elem *r, const hr_ff_elem *j, int visible,
   }
 }
 
-/* Fills F, Fu, dF and dS of link 'l' (receiver, source and candidate list already set). */
+/* F of a link whose estimate is left for later (link_eval). */
+#define F_LATER (-1.0f)
+
+/* Fills F, Fu, dF and dS of link 'l', a refinement's child (receiver, source and candidate list
+ * already set). A link whose estimate would cast rays gets none yet: F is F_LATER until
+ * link_estimate, which refinement calls once a round keeps the link. The estimate's samples are
+ * keyed by the pair's gids, so its value does not depend on when it is drawn. */
 static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64_t *rays) {
   const hr_ff_elem gr = hr_elem_geom(s, &s->el[l->r]), gj = hr_elem_geom(s, &s->el[l->s]);
   double spread, fu = hr_ff_pair(&gr, &gj, 0, &spread), hd = 0, he = 0;
   const int k = pair_rays(s), kd = decide_rays(s), nc = l->ncand;
+  int defer = 0;
   if (fu > 0 || (elem_in_front(&gr, &gj) && elem_in_front(&gj, &gr))) {
     const hr_vf_elem a = vf_elem(s, l->r, &gr), b = vf_elem(s, l->s, &gj);
     const double fs = f_small(&gr, &gj, fu);
     hd = pair_h(s, a, b, pool + l->cand_off, nc, kd, STREAM_DECIDE, fs, NULL, rays);
-    he = estimate_h(s, a, b, pool + l->cand_off, nc, k, hd, fs, NULL, rays);
+    defer = nc != 0;
+    if (!defer) he = estimate_h(s, a, b, pool + l->cand_off, nc, k, hd, fs, NULL, rays);
   }
   source_shares(&gr, &gj, nc == 0 || hd == 1, l->w);
   l->Fu = (float)fu;
-  l->F = (float)(fu * he);
+  l->F = defer ? F_LATER : (float)(fu * he);
   l->dF = (float)link_df(&gr, &gj, fu, spread, hd);
   l->dS = (float)link_ds(&gr, &gj, fu, hd);
+}
+
+/* The estimate link_eval left for later: F, bit for bit what link_eval would have set (the
+ * unoccluded form factor computed again: a link carries it only as a float). */
+static void link_estimate(const hr_solver *s, const int32_t *pool, hr_link *l, int64_t *rays) {
+  assert(l->F == F_LATER && l->ncand != 0);
+  const hr_ff_elem gr = hr_elem_geom(s, &s->el[l->r]), gj = hr_elem_geom(s, &s->el[l->s]);
+  double spread;
+  const double fu = hr_ff_pair(&gr, &gj, 0, &spread);
+  const hr_vf_elem a = vf_elem(s, l->r, &gr), b = vf_elem(s, l->s, &gj);
+  const double he = pair_h(s, a, b, pool + l->cand_off, l->ncand, pair_rays(s), STREAM_ESTIMATE,
+                           f_small(&gr, &gj, fu), NULL, rays);
+  l->F = (float)(fu * he);
 }
 
 /* Fine sources. An input polygon that cannot be split (at most A_e) close to a larger leaf sees
@@ -1239,6 +1260,25 @@ static hr_link *keep_in_place(hr_link **cur, int64_t n, const uint8_t *dec, cons
   return l;
 }
 
+/* Draws the estimates that link_eval left for later of the links of cur that this round keeps.
+ * A link split in the round after the one that made it is never gathered: its estimate would
+ * be wasted. */
+static void estimate_kept(hr_solver *s, hr_link *cur, int64_t ncur, const uint8_t *dec,
+                          int64_t *rays) {
+  int64_t r = 0;
+#pragma omp parallel for schedule(dynamic, 256) reduction(+ : r) if (ncur > 1024) \
+    num_threads(s->threads)
+  for (int64_t i = 0; i < ncur; i++) {
+    if (dec[i] != KEEP || cur[i].F != F_LATER) continue;
+    const int64_t r0 = r;
+    link_estimate(s, s->pool, &cur[i], &r);
+    const float cast = (float)(r - r0); /* the receiver's work (balance.c) */
+#pragma omp atomic
+    s->erays[cur[i].r] += cast;
+  }
+  *rays += r;
+}
+
 hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) {
   *nnew = 0;
   /* Most iterations split nothing: decide for every link first, without copying the graph. */
@@ -1311,6 +1351,7 @@ hr_status hr_link_refine(hr_solver *s, double bf_e, int64_t *nnew, hr_err *err) 
         st = HR_ERR_NOMEM;
       }
     }
+    if (st == HR_OK && round > 0) estimate_kept(s, cur, ncur, dec, &rays);
     if (st == HR_OK) {
       int64_t *sl2 = realloc(slot, (size_t)(ncur > 0 ? ncur : 1) * sizeof *slot);
       if (sl2) slot = sl2;
