@@ -23,7 +23,7 @@
 #include <string.h>
 
 #define MAGIC "HRADCKP1"
-#define VERSION 7u
+#define VERSION 8u
 
 /* ---------------------------------------------------------------- hashing */
 
@@ -80,7 +80,7 @@ static void put(writer *w, const void *p, size_t n) {
 /* The progress of Figure 3. */
 typedef struct progress {
   int32_t iterations, converged, done, stopped, lazy, xwin, xlast, pad;
-  double bf_e, unit, prev_change, prev_abs;
+  double bf_e, unit, prev_change, stall_abs;
   int64_t stall, rays, initial_links;
   hr_timing t;
 } progress;
@@ -260,7 +260,7 @@ hr_status hr_solver_checkpoint(const hr_solver *s, const char *path, hr_err *err
   const int64_t init = s->dist ? s->g_initial : s->initial_links;
   progress pr = {s->iterations, s->converged, s->done,        s->stopped,
                  s->lazy,       s->xwin,      s->xlast,       0,
-                 s->bf_e,       s->unit,      s->prev_change, s->prev_abs,
+                 s->bf_e,       s->unit,      s->prev_change, s->stall_abs,
                  s->stall,      rays,         init,           s->t};
   put(&w, &pr, sizeof pr);
   put(&w, &ne, sizeof ne);
@@ -559,7 +559,7 @@ static hr_status resume(hr_solver *s, const char *path, hr_err *err) {
   s->stopped = pr.stopped, s->lazy = pr.lazy, s->bf_e = pr.bf_e, s->unit = pr.unit;
   s->xwin = pr.xwin, s->xlast = pr.xlast;
   s->rays = pr.rays;
-  s->prev_change = pr.prev_change, s->prev_abs = pr.prev_abs, s->stall = pr.stall;
+  s->prev_change = pr.prev_change, s->stall_abs = pr.stall_abs, s->stall = pr.stall;
   s->initial_links = pr.initial_links, s->t = pr.t;
   s->started = 1;
   /* A run that stopped without converging (max_iters, or its callback) goes on when this

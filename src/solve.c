@@ -339,33 +339,57 @@ static hr_status check_physical(const hr_solver *s, hr_err *err) {
 /* The guard against a solve that cannot end: the iteration contracts by the spectral radius of
  * rho F, which is below 1 only while the scene absorbs some light. In a closed scene whose
  * materials reflect everything (exports that write Kd 1 1 1) it is 1, and the discretisation
- * error of the form factors (row sums of a closed box about 0.8% above 1) takes it above 1: B
+ * error of the form factors (row sums of a closed box about 0.8% above 1) can take it above 1: B
  * then grows without bound (a white box reached 2e4 times its emission after 1000 iterations).
- * STALL_N iterations in a row without new links whose largest change is at least STALL_Q times
- * the one before mean a radius so near 1 that converging would take more than 1e4 iterations:
- * an error naming the most reflective material. A scene that absorbs 1% contracts by 0.99. */
+ * The contraction is measured over windows of STALL_N iterations without new links, q = (change
+ * at the end / change at the start)^(1 / STALL_N): a whole number of extrapolation periods, so
+ * that both ends sit at the same phase of its jumps (step by step, each jump and the drop after
+ * it broke any run of slow steps, and a white box at one level of BF_e, q = 0.995, ran its 1000
+ * iterations to a result several times too bright, exit 0). An error naming the most reflective
+ * material when q >= STALL_Q (converging would take more than 1e4 iterations), or at BF_low when
+ * q >= SLOW_Q (the scene absorbs less than 1%) and strict convergence (advance) would need more
+ * iterations than --max-iters leaves. */
 #define STALL_Q 0.9995
-#define STALL_N 50
+#define SLOW_Q 0.99
+#define STALL_N (10 * HR_XPERIOD)
 static hr_status check_contracting(hr_solver *s, double abs, int64_t nnew, hr_err *err) {
-  if (!s->xprev) { /* the step after an extrapolation is no contraction step: no verdict */
-    if (nnew == 0 && s->prev_abs > 0 && abs >= STALL_Q * s->prev_abs) s->stall++;
-    else s->stall = 0;
+  if (nnew > 0) { /* the window begins after the next iteration: this one's step has the new
+                     links in it */
+    s->stall = -1;
+    return HR_OK;
   }
-  const double q = s->prev_abs > 0 ? abs / s->prev_abs : 0;
-  s->prev_abs = abs;
-  if (s->stall < STALL_N) return HR_OK;
+  if (s->stall < 0 || !(s->stall_abs > 0)) {
+    s->stall = 0, s->stall_abs = abs;
+    return HR_OK;
+  }
+  if (++s->stall < STALL_N) return HR_OK;
+  const double q = pow(abs / s->stall_abs, 1.0 / STALL_N), change = abs / s->unit;
+  s->stall = 0, s->stall_abs = abs;
+  const int at_low = s->bf_e <= s->opt.bf_low * (1 + 1e-12);
+  /* iterations until change q / (1 - q) < b_eps at this rate (advance's strict test) */
+  const double need = q < 1 && change * q / (1 - q) >= s->b_eps
+                          ? log(s->b_eps * (1 - q) / (change * q)) / log(q)
+                          : 0;
+  const double left = (double)s->opt.max_iters - s->iterations - 1;
+  const int slow = at_low && q >= SLOW_Q && need > left;
+  if (q < STALL_Q && !slow) return HR_OK;
   const hr_scene *sc = s->scene;
   int mw = 0;
   double rw = -1;
   for (int m = 0; m < sc->nmats; m++)
     for (int c = 0; c < 3; c++)
       if (sc->mats[m].rho[c] > rw) rw = sc->mats[m].rho[c], mw = m;
+  char within[96] = "";
+  if (q < STALL_Q)
+    snprintf(within, sizeof within, " within --max-iters %d (about %.0f more iterations needed)",
+             s->opt.max_iters, need);
   return hr_err_set(err, HR_ERR_UNPHYSICAL,
-                    "the solution does not converge: the scene keeps nearly all its light (after "
-                    "%d iterations the largest change of radiosity is %.6f of the one before, %d "
-                    "times in a row); its most reflective material is '%s' (reflectance %g): "
+                    "the solution does not converge%s: the scene keeps nearly all its light "
+                    "(over iterations %d to %d the largest change of radiosity went by a factor "
+                    "of %.6f an iteration); its most reflective material is '%s' (reflectance %g): "
                     "lower the reflectances (real surfaces reflect at most about 0.9)",
-                    s->iterations + 1, q, STALL_N, sc->mats[mw].name, rw);
+                    within, s->iterations + 2 - STALL_N, s->iterations + 1, q,
+                    sc->mats[mw].name, rw);
 }
 
 /* The radiosity unit (see solver_impl.h): the area-weighted mean radiosity of the surfaces,

@@ -150,8 +150,10 @@ struct hr_solver {
   int stopped;        /* the caller's callback stopped the run */
   double bf_e;        /* BF_e of the next iteration */
   double prev_change; /* the last iteration's change at BF_low if it made no links, else 0 */
-  double prev_abs;    /* the last iteration's largest change of B (absolute) */
-  int64_t stall;      /* iterations in a row without new links whose change did not shrink */
+  double stall_abs;   /* the largest change of B (absolute) where the contraction guard's
+                         window began (check_contracting) */
+  int64_t stall;      /* iterations in that window so far, none of them with new links (-1:
+                         the window begins with the next iteration) */
   int lazy;           /* HR_REFINE_*: whether the next iteration refines (solve.c) */
   int refined;        /* the last iteration refined */
   int xwin;           /* iterations in a row without new links, the last one included: the
