@@ -1,7 +1,8 @@
 /* ffacc.c: accuracy and cost of the unoccluded form-factor rules of src/ff.h against a converged
  * reference (composite Gauss quadrature of the exact point kernel on the receiver), over
  * configurations that occur in radiosity meshes: parallel plates, perpendicular plates sharing an
- * edge or separated by a gap, and random pairs at a given clearance. Prints, per configuration
+ * edge or separated by a gap, random pairs at a given clearance, a receiver reaching through the
+ * source's plane, and a long strip (a sliver) under a small plate. Prints, per configuration
  * family and clearance, the worst and RMS relative error of eq. (2) at the centres and of
  * hr_ff_pair at orders 1..3 and the automatic order, and the time per evaluation.
  *   build/bench/ffacc */
@@ -61,8 +62,8 @@ typedef struct stat {
   int n;
 } stat;
 
-static void add(stat *st, const hr_ff_elem *r, const hr_ff_elem *s) {
-  double ref = reference(r, s, 48);
+/* One pair against the reference value 'ref'. */
+static void add_ref(stat *st, const hr_ff_elem *r, const hr_ff_elem *s, double ref) {
   if (!(ref > 1e-9)) return;
   double v[6];
   v[0] = hr_ff_disk(r, s);
@@ -76,6 +77,10 @@ static void add(stat *st, const hr_ff_elem *r, const hr_ff_elem *s) {
   }
   st->sq[5] += v[5];
   st->n++;
+}
+
+static void add(stat *st, const hr_ff_elem *r, const hr_ff_elem *s) {
+  add_ref(st, r, s, reference(r, s, 48));
 }
 
 static void print(const char *what, const stat *st) {
@@ -170,6 +175,45 @@ int main(void) {
     }
     char name[64];
     snprintf(name, sizeof name, "random clearance=%g", ts[ti]);
+    print(name, &st);
+  }
+  /* Straddling: the receiver, a unit square in y = 0 facing +y with z in [-a, 1 - a], reaches
+   * through the plane of the source, a square in z = 0 facing +z (x in [0, 1], y in [y0, y0 +
+   * h]): hr_ff_point is 0 over the part behind that plane and jumps at z = 0, inside the
+   * receiver. Reference: the part in front alone (a rectangle), times its share of the area. */
+  {
+    stat st = {{0}, {0}, 0};
+    double as[] = {0.1, 0.25, 0.5, 0.75}, hs[] = {0.25, 1, 4};
+    for (int ai = 0; ai < 4; ai++)
+      for (int hi = 0; hi < 3; hi++)
+        for (int yo = 0; yo < 2; yo++) {
+          const double a = as[ai], h = hs[hi], y0 = yo * 0.5 * h;
+          hr_ff_elem r = quad(v3(0, 0, -a), v3(0, 0, 1 - a), v3(1, 0, 1 - a), v3(1, 0, -a));
+          hr_ff_elem f = quad(v3(0, 0, 0), v3(0, 0, 1 - a), v3(1, 0, 1 - a), v3(1, 0, 0));
+          hr_ff_elem s = quad(v3(0, y0, 0), v3(1, y0, 0), v3(1, y0 + h, 0), v3(0, y0 + h, 0));
+          add_ref(&st, &r, &s, reference(&f, &s, 48) * (1 - a));
+        }
+    print("straddling (receiver through plane)", &st);
+  }
+  /* Slivers: the receiver a strip L x 1 in z = 0 facing +z, the source a 1 x 4 plate standing
+   * at height d over the strip's middle, facing down (-z), its long side across the strip:
+   * hr_ff_point peaks over a stretch of the strip about d + 1 long. Reference by reciprocity,
+   * the source's area over the receiver's times F from source to receiver, whose kernel is
+   * smooth over the small source. */
+  double Ls[] = {4, 16, 64, 256};
+  for (int li = 0; li < 4; li++) {
+    stat st = {{0}, {0}, 0};
+    const double L = Ls[li];
+    double ds[] = {0.1, 0.5, 2};
+    for (int di = 0; di < 3; di++) {
+      const double d = ds[di];
+      hr_ff_elem r = quad(v3(0, 0, 0), v3(L, 0, 0), v3(L, 1, 0), v3(0, 1, 0));
+      hr_ff_elem s = quad(v3(0.5 * L - 0.5, -1.5, d), v3(0.5 * L - 0.5, 2.5, d),
+                          v3(0.5 * L + 0.5, 2.5, d), v3(0.5 * L + 0.5, -1.5, d));
+      add_ref(&st, &r, &s, reference(&s, &r, 48) * s.area / r.area);
+    }
+    char name[64];
+    snprintf(name, sizeof name, "sliver receiver L=%g", L);
     print(name, &st);
   }
   /* Cost per evaluation. */
