@@ -349,6 +349,9 @@ static hr_status check_physical(const hr_solver *s, hr_err *err) {
  * material when q >= STALL_Q (converging would take more than 1e4 iterations), or at BF_low when
  * q >= SLOW_Q (the scene absorbs less than 1%) and strict convergence (advance) would need more
  * iterations than --max-iters leaves. */
+/* Whether the current BF_e is the last level's, BF_low (within rounding of the schedule). */
+static int at_bf_low(const hr_solver *s) { return s->bf_e <= s->opt.bf_low * (1 + 1e-12); }
+
 #define STALL_Q 0.9995
 #define SLOW_Q 0.99
 #define STALL_N (10 * HR_XPERIOD)
@@ -365,7 +368,7 @@ static hr_status check_contracting(hr_solver *s, double abs, int64_t nnew, hr_er
   if (++s->stall < STALL_N) return HR_OK;
   const double q = pow(abs / s->stall_abs, 1.0 / STALL_N), change = abs / s->unit;
   s->stall = 0, s->stall_abs = abs;
-  const int at_low = s->bf_e <= s->opt.bf_low * (1 + 1e-12);
+  const int at_low = at_bf_low(s);
   /* iterations until change q / (1 - q) < b_eps at this rate (advance's strict test) */
   const double need = q < 1 && change * q / (1 - q) >= s->b_eps
                           ? log(s->b_eps * (1 - q) / (change * q)) / log(q)
@@ -498,7 +501,7 @@ static hr_status iterate(hr_solver *s, double *change, int64_t *nnew, hr_err *er
  * next level when this one is done, or sets s->done (and s->converged at BF_low). */
 static void advance(hr_solver *s, double change, int64_t nnew, int stop) {
   const hr_options *o = &s->opt;
-  const int at_low = s->bf_e <= o->bf_low * (1 + 1e-12);
+  const int at_low = at_bf_low(s);
   /* Strict convergence ({16}, and {18} at BF_low): B settled and no link refined. At BF_low,
    * "settled" means the error left, not the last step: the iteration contracts by about
    * q = change / previous change, so the remaining error is about change q / (1 - q), which
