@@ -324,7 +324,9 @@ typedef enum {
   HR_PHASE_LINK = 0, /* initial linking (paper step {1}): 'fraction' of the surface pairs done */
   HR_PHASE_SOLVE     /* refinement iterations: 'fraction' is the share of the multigrid schedule
                         done (levels of BF_e from bf_start down to bf_low, and convergence at
-                        BF_low), a lower bound that reaches 1 when the run ends */
+                        BF_low: the change's fall from the first at BF_low toward b_eps, on a
+                        log scale), reaching 1 when the run ends; not a share of the time
+                        (refinement front-loads the work), so no base for an ETA */
 } hr_phase;
 /* Called on the thread that called hr_solver_run, with 'fraction' in [0, 1] never decreasing
  * within a phase; at most about 10 times a second, and once with fraction 1 at the end of each

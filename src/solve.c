@@ -620,21 +620,38 @@ hr_status hr_solver_set_balance(hr_solver *s, int method, double alpha, double i
   return HR_OK;
 }
 
-/* The share of the multigrid schedule done, for HR_PHASE_SOLVE: the levels of BF_e passed from
- * bf_start down to bf_low, over their number plus one for the convergence at BF_low; 1 when the
- * run is done. A lower bound that never decreases. */
-static double schedule_done(const hr_solver *s) {
+/* Progress of the convergence at BF_low, after an iteration at 'bf_e' that changed B by at
+ * most 'change': how far the change has fallen from the first one at BF_low toward b_eps, on a
+ * log scale (the iteration contracts the error by a factor, so equal steps on it are about
+ * equal numbers of iterations), at most 0.99 until the run ends, never decreasing. Without it
+ * a run of one level (the defaults) reported 0% until its end. */
+static void track_convergence(hr_solver *s, double bf_e, double change) {
+  if (!(bf_e <= s->opt.bf_low * (1 + 1e-12)) || !(change > 0)) return;
+  if (!(s->conv_first > 0)) s->conv_first = change;
+  const double span = log(s->conv_first / s->b_eps);
+  const double f = span > 0 ? log(s->conv_first / change) / span : 1;
+  s->conv_done = fmax(s->conv_done, fmin(f, 0.99));
+}
+
+/* The share of the multigrid schedule done: the levels of BF_e passed from bf_start down to
+ * bf_low, plus 'conv' (the share of the convergence at BF_low, counted as one more level) once
+ * at BF_low, over their number plus one; 1 when the run is done. For HR_PHASE_SOLVE
+ * (schedule_done, never decreasing) it is not a share of the time: refinement makes most
+ * links in the first iterations of a level. */
+static double schedule_share(const hr_solver *s, double conv) {
   if (s->done) return 1;
   const hr_options *o = &s->opt;
   double lf = log(o->bf_factor), total = log(o->bf_start / o->bf_low) / lf + 1;
-  double passed = log(o->bf_start / s->bf_e) / lf;
+  double passed = log(o->bf_start / s->bf_e) / lf + (at_bf_low(s) ? conv : 0);
   return total > 0 ? fmin(fmax(passed / total, 0), 1) : 0;
 }
+
+static double schedule_done(const hr_solver *s) { return schedule_share(s, s->conv_done); }
 
 double hr_solver_iters_left(const hr_solver *s) {
   /* the schedule's share alone errs long in the first level of BF_e, which iterates to
    * convergence (museum: 19 -> 399 left over its first 21 iterations): no more than done */
-  const double f = fmax(schedule_done(s), 0.05);
+  const double f = fmax(schedule_share(s, 0), 0.05);
   return fmin(s->iterations * (1 - f) / f, s->iterations);
 }
 
@@ -667,6 +684,7 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     double change = 0;
     int64_t nnew = 0;
     if ((st = iterate(s, &change, &nnew, err)) != HR_OK) return st;
+    track_convergence(s, bf_e, change);
     advance(s, change, nnew, 0);
     if (s->migrate_seed && !s->done && (st = test_migrate(s, err)) != HR_OK) return st;
     if (!s->done && (st = maybe_balance(s, err)) != HR_OK) return st;

@@ -150,6 +150,10 @@ struct hr_solver {
   int stopped;        /* the caller's callback stopped the run */
   double bf_e;        /* BF_e of the next iteration */
   double prev_change; /* the last iteration's change at BF_low if it made no links, else 0 */
+  double conv_first;  /* the first change at BF_low and the share of the way from it down to
+                         b_eps done so far (track_convergence, solve.c): for progress reports
+                         only, so not in checkpoints (a resumed run measures anew) */
+  double conv_done;
   double stall_abs;   /* the largest change of B (absolute) where the contraction guard's
                          window began (check_contracting) */
   int64_t stall;      /* iterations in that window so far, none of them with new links (-1:

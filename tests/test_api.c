@@ -6,6 +6,7 @@
 #include <stdint.h>
 #include <string.h>
 #include <sys/stat.h>
+#include <time.h>
 #include <unistd.h>
 
 /* ------------------------------------------------------------------ materials */
@@ -65,6 +66,41 @@ static void test_progress(hr_solver *a, hr_solver *b) {
   CHECK(la.calls == 1, "a called after its callback was removed");
   CHECK(hr_solver_set_progress(b, NULL, NULL) == HR_OK, "clear b");
   CHECK(hr_solver_set_progress(NULL, on_progress, NULL) == HR_ERR_INVALID, "NULL solver");
+}
+
+/* The solve's reports on a run of one level of BF_e (the defaults): the share moves before the
+ * end (it stayed at 0 until the last iteration before the convergence share), never falls, and
+ * ends at 1. The callback sleeps past the solver's 0.1 s between reports, so every iteration
+ * reports. */
+typedef struct {
+  int n;
+  double f[256];
+} progress_trace;
+
+static void on_progress_trace(void *ud, hr_phase phase, double fraction) {
+  progress_trace *l = ud;
+  if (phase != HR_PHASE_SOLVE || l->n == 256) return;
+  l->f[l->n++] = fraction;
+  nanosleep(&(struct timespec){0, 110000000}, NULL);
+}
+
+static void test_progress_run(hr_solver *s) {
+  progress_trace l = {0};
+  hr_err err = {{0}};
+  CHECK(hr_solver_set_progress(s, on_progress_trace, &l) == HR_OK, "set");
+  CHECK(hr_solver_run(s, NULL, NULL, &err) == HR_OK, "run: %s", err.msg);
+  CHECK(hr_solver_set_progress(s, NULL, NULL) == HR_OK, "clear");
+  int up = 1, mid = 0;
+  for (int i = 0; i < l.n; i++) {
+    up &= i == 0 || l.f[i] >= l.f[i - 1];
+    mid += l.f[i] >= 0.2 && l.f[i] < 1;
+  }
+  CHECK(l.n >= 3 && up && mid > 0 && l.f[l.n - 1] == 1,
+        "solve progress: %d reports, increasing %d, %d between 0.2 and 1, last %g", l.n, up, mid,
+        l.n ? l.f[l.n - 1] : -1);
+  printf("solve progress: %d reports:", l.n);
+  for (int i = 0; i < l.n; i++) printf(" %.2f", l.f[i]);
+  printf("\n");
 }
 
 /* ------------------------------------------------------------------ writers */
@@ -201,6 +237,7 @@ int main(void) {
   CHECK(hr_solver_create(sc, &o, &s, &err) == HR_OK, "create: %s", err.msg);
   CHECK(hr_solver_create(sc, &o, &s2, &err) == HR_OK, "create: %s", err.msg);
   test_progress(s, s2);
+  test_progress_run(s2);
   CHECK(hr_solver_run(s, NULL, NULL, &err) == HR_OK, "run: %s", err.msg);
   test_png(s, dir);
   test_meshes(s, dir);

@@ -163,10 +163,11 @@ static double now_s(void) {
 /* ---------------------------------------------------------------- progress and warnings */
 
 /* Progress (issue 13). On a terminal, one line redrawn with '\r' (the phase, a bar, the share
- * done, the seconds spent and, past 2%, an estimate of those left), erased before any other
- * line is printed and redrawn after it; the per-iteration lines stay as they were. When stderr
- * is not a terminal, a plain line at most every PLAIN_EVERY seconds of a phase, never '\r'. Only
- * rank 0 draws (the others are --quiet); --quiet and --no-progress draw nothing. */
+ * done, the seconds spent and, past 2% of initial linking, an estimate of those left), erased
+ * before any other line is printed and redrawn after it; the per-iteration lines stay as they
+ * were. When stderr is not a terminal, a plain line at most every PLAIN_EVERY seconds of a
+ * phase, never '\r'. Only rank 0 draws (the others are --quiet); --quiet and --no-progress draw
+ * nothing. */
 #define PLAIN_EVERY 5.0  /* seconds between plain progress lines */
 #define BAR_WIDTH 20
 #define PH_WRITE 100     /* the phase after the solve: writing the outputs (no fraction) */
@@ -235,7 +236,10 @@ static const char *phase_name(int phase) {
                                    : "writing outputs";
 }
 
-/* "12.3 s, about 9 s left" for 'secs' spent on 'fraction' of a phase. */
+/* "12.3 s, about 9 s left" for 'secs' spent on 'fraction' of a phase; "12.3 s" alone for a
+ * fraction of 0. The solve's share (the BF_e schedule and the convergence at BF_low) is not a
+ * share of its time, so it gets no estimate: on the conference room it would have said 5 min
+ * left with one to go. */
 static void eta_text(char *out, size_t n, double secs, double fraction) {
   int k = snprintf(out, n, "%.1f s", secs);
   if (k < 0 || (size_t)k >= n || !(fraction > 0.02) || fraction >= 1) return;
@@ -257,7 +261,7 @@ static void tty_line(char *out, size_t n, int phase, double fraction, double sec
   const int full = (int)(fraction * BAR_WIDTH);
   for (int i = 0; i < BAR_WIDTH; i++) bar[i] = i < full ? '#' : '.';
   bar[BAR_WIDTH] = 0;
-  eta_text(eta, sizeof eta, secs, fraction);
+  eta_text(eta, sizeof eta, secs, phase == HR_PHASE_SOLVE ? 0 : fraction);
   snprintf(out, n, "%-15s  [%s] %3.0f%%  %s", phase_name(phase), bar, floor(100 * fraction),
            eta);
 }
@@ -279,7 +283,7 @@ static void on_progress(void *ud, hr_phase phase, double fraction) {
     progress_draw();
   } else if (fraction < 1 && t - g_prog.t_plain >= PLAIN_EVERY) {
     char eta[64];
-    eta_text(eta, sizeof eta, secs, fraction);
+    eta_text(eta, sizeof eta, secs, phase == HR_PHASE_SOLVE ? 0 : fraction);
     fprintf(stderr, "hrad: %s %.0f%% (%s)\n", phase_name(phase), floor(100 * fraction),
             eta);
     g_prog.t_plain = t;
