@@ -806,29 +806,41 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn, double
   /* one receiver's (point, source) pairs, evaluated four at a time whatever their sources
    * (a pair at one point filled one lane of four: 37% of the kernel's calls on the conference
    * room), then summed pair by pair in hr_ff_pair's order */
-  const hr_vec3 *px[EXACT_PAIRS * 9];
-  const hr_ff_elem *ps[EXACT_PAIRS * 9];
-  double fx[EXACT_PAIRS * 9];
-  int8_t oj[EXACT_PAIRS];
+  const hr_vec3 *px[EXACT_PAIRS * HR_FF_CLIP_POINTS];
+  const hr_ff_elem *ps[EXACT_PAIRS * HR_FF_CLIP_POINTS];
+  double fx[EXACT_PAIRS * HR_FF_CLIP_POINTS];
+  int8_t oj[EXACT_PAIRS], nj[EXACT_PAIRS];
+  const double *wj[EXACT_PAIRS];
   for (int i = 0; i < nr; i++) {
     const hr_ff_elem *gi = &gr[i];
     hr_vec3 x[3][9];
     double w[3][9], fi = 0, fs[2] = {0, 0};
     int np[3] = {-1, -1, -1}, nq = 0;
+    /* the clipped points of the pairs that i reaches through the plane of (hr_ff_pair's rule:
+     * the same sums) */
+    hr_vec3 xc[EXACT_PAIRS][HR_FF_CLIP_POINTS];
+    double wc[EXACT_PAIRS][HR_FF_CLIP_POINTS];
     for (int j = 0; j < ns; j++) {
       /* half of the pairs in clustered museum, and three quarters of the points (they take
        * the highest order, since one reaches behind the other) */
       const int o = oj[j] = (int8_t)(hr_ff_pair_class(gi, &gs[j], &hr[i], &hs[j]) - 1);
       if (o < 0) continue;
-      if (np[o] < 0) np[o] = hr_ff_points(gi, o + 1, x[o], w[o]);
-      for (int k = 0; k < np[o]; k++) px[nq] = &x[o][k], ps[nq++] = &gs[j];
+      const int nc = o == 2 ? hr_ff_clip_points(gi, &gs[j], xc[j], wc[j]) : 0;
+      const hr_vec3 *xj = xc[j];
+      if (nc > 0) {
+        nj[j] = (int8_t)nc, wj[j] = wc[j];
+      } else {
+        if (np[o] < 0) np[o] = hr_ff_points(gi, o + 1, x[o], w[o]);
+        nj[j] = (int8_t)np[o], wj[j] = w[o], xj = x[o];
+      }
+      for (int k = 0; k < nj[j]; k++) px[nq] = &xj[k], ps[nq++] = &gs[j];
     }
     hr_ff_point_pairs(px, ps, nq, gi->n, fx);
     for (int j = 0, q = 0; j < ns; j++) {
       const int o = oj[j];
       if (o < 0) continue;
       double fij = 0;
-      for (int k = 0; k < np[o]; k++) fij += w[o][k] * fx[q++];
+      for (int k = 0; k < nj[j]; k++) fij += wj[j][k] * fx[q++];
       fi += fij;
       fs[j >= m0] += fij;
     }

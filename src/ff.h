@@ -66,8 +66,20 @@ int hr_ff_pair_class(const hr_ff_elem *r, const hr_ff_elem *s, const hr_ff_shape
  * summing to 1 (area measure). Returns the number of points. */
 int hr_ff_points(const hr_ff_elem *e, int order, hr_vec3 *x, double *w);
 
+/* Most points hr_ff_clip_points gives: the clipped receiver (at most 5 corners) as a fan of at
+ * most 3 triangles, 6 points each. */
+#define HR_FF_CLIP_POINTS 18
+
+/* Quadrature points of the part of receiver 'r' in front of the plane of source 's', where r
+ * reaches through that plane (corners strictly on both sides) and is not a sliver (squared
+ * diameter at most HR_FF_CLIP_ELONGATION times its area): up to HR_FF_CLIP_POINTS points 'x'
+ * with weights 'w' summing to the share of r's area in front (order 3 on each triangle).
+ * Returns their number, 0 where the rule does not apply (use hr_ff_points). */
+int hr_ff_clip_points(const hr_ff_elem *r, const hr_ff_elem *s, hr_vec3 *x, double *w);
+
 /* Unoccluded form factor F(r <- s): the area mean over the receiver of hr_ff_point, by the
- * quadrature rule of order 'order' (0: hr_ff_order). '*spread' (may be NULL) receives an
+ * quadrature rule of order 'order' (0: hr_ff_order), or where r reaches through the plane of s,
+ * over the part in front (hr_ff_clip_points, whatever 'order'). '*spread' (may be NULL) receives an
  * estimate of how much the point form factor varies over the receiver (largest minus smallest):
  * from the quadrature points, extrapolated to the element's sides, or for one point from the
  * point-to-disk estimate at the receiver's corners. This function can't fail. */

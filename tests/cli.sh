@@ -51,8 +51,8 @@ if "$hrad" --quiet $opts -o "$t/r1" --threads 1 room; then
   it=$(json "$t/r1/stats.json" iterations)
   echo "     room: elements $el links $li iterations $it"
   [ "$el" = "${GOLD_ELEMENTS:-1872}" ] && ok "room elements golden ($el)" || bad "room elements $el (golden ${GOLD_ELEMENTS:-1872})"
-  [ "$li" = "${GOLD_LINKS:-308655}" ] && ok "room links golden ($li)" || bad "room links $li (golden ${GOLD_LINKS:-308655})"
-  [ "$it" = "${GOLD_ITERS:-41}" ] && ok "room iterations golden ($it)" || bad "room iterations $it (golden ${GOLD_ITERS:-41})"
+  [ "$li" = "${GOLD_LINKS:-309738}" ] && ok "room links golden ($li)" || bad "room links $li (golden ${GOLD_LINKS:-309738})"
+  [ "$it" = "${GOLD_ITERS:-42}" ] && ok "room iterations golden ($it)" || bad "room iterations $it (golden ${GOLD_ITERS:-42})"
   for n in 2 3 4; do
     "$hrad" --quiet $opts -o "$t/r$n" --threads $n room
     cmp -s "$t/r1/surfaces.csv" "$t/r$n/surfaces.csv" && ok "room surfaces.csv identical with $n threads" \
