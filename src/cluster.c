@@ -811,6 +811,7 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn, double
   double fx[EXACT_PAIRS * HR_FF_CLIP_POINTS];
   int8_t oj[EXACT_PAIRS], nj[EXACT_PAIRS];
   const double *wj[EXACT_PAIRS];
+  double fr[EXACT_PAIRS]; /* the pair's value by reciprocity, or -1 */
   for (int i = 0; i < nr; i++) {
     const hr_ff_elem *gi = &gr[i];
     hr_vec3 x[3][9];
@@ -825,9 +826,14 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn, double
        * the highest order, since one reaches behind the other) */
       const int o = oj[j] = (int8_t)(hr_ff_pair_class(gi, &gs[j], &hr[i], &hs[j]) - 1);
       if (o < 0) continue;
-      const int nc = o == 2 ? hr_ff_clip_points(gi, &gs[j], xc[j], wc[j]) : 0;
+      fr[j] = o == 2 && hr_ff_recip_applies(gi, &gs[j], hr[i].diam, hs[j].diam)
+                  ? hr_ff_recip(gi, &gs[j])
+                  : -1;
+      const int nc = o == 2 && fr[j] < 0 ? hr_ff_clip_points(gi, &gs[j], xc[j], wc[j]) : 0;
       const hr_vec3 *xj = xc[j];
-      if (nc > 0) {
+      if (fr[j] >= 0) {
+        nj[j] = 0;
+      } else if (nc > 0) {
         nj[j] = (int8_t)nc, wj[j] = wc[j];
       } else {
         if (np[o] < 0) np[o] = hr_ff_points(gi, o + 1, x[o], w[o]);
@@ -839,7 +845,7 @@ static double exact_unoccluded(const hr_solver *s, int32_t r, int32_t sn, double
     for (int j = 0, q = 0; j < ns; j++) {
       const int o = oj[j];
       if (o < 0) continue;
-      double fij = 0;
+      double fij = fr[j] >= 0 ? fr[j] : 0;
       for (int k = 0; k < nj[j]; k++) fij += wj[j][k] * fx[q++];
       fi += fij;
       fs[j >= m0] += fij;

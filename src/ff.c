@@ -504,6 +504,32 @@ int hr_ff_clip_points(const hr_ff_elem *r, const hr_ff_elem *s, hr_vec3 *x, doub
   return n;
 }
 
+/* Small near sources. Where a source much smaller than the receiver is near it, the point
+ * form factor peaks over the part of the receiver next to the source, which the receiver's 9
+ * points miss or hit; integrated over the small source instead (the point form factor from its
+ * points to the receiver polygon, exact) and taken back by reciprocity, F(r <- s) = A_s / A_r
+ * F(s <- r), it is smooth (ffacc, RMS: perpendicular plates meeting at an edge 2.09 -> 0.51%,
+ * random pairs at clearance 0.1 1.66 -> 0.07%), and `office` went from 1.080% to 1.038%.
+ * It goes before the clipped rule: a small source reaches through the receiver's plane as
+ * well, and the source's points then stop at that plane (hr_ff_point clips the receiver
+ * polygon to each point's tangent plane); clipping the receiver instead left office at 1.091%.
+ * Neither may be a sliver (the rule of HR_FF_CLIP_ELONGATION, and for the same reason: the
+ * conference room's window rail). */
+int hr_ff_recip_applies(const hr_ff_elem *r, const hr_ff_elem *s, double dr, double ds) {
+  return ds < 0.5 * dr && dr * dr <= HR_FF_CLIP_ELONGATION * r->area &&
+         ds * ds <= HR_FF_CLIP_ELONGATION * s->area;
+}
+
+double hr_ff_recip(const hr_ff_elem *r, const hr_ff_elem *s) {
+  hr_vec3 y[HR_FF_CLIP_POINTS];
+  double wy[HR_FF_CLIP_POINTS], fy[HR_FF_CLIP_POINTS], g = 0;
+  int m = hr_ff_clip_points(s, r, y, wy);
+  if (m == 0) m = hr_ff_points(s, 3, y, wy);
+  hr_ff_point_many(y, m, s->n, r, fy);
+  for (int k = 0; k < m; k++) g += wy[k] * fy[k];
+  return r->area > 0 ? g * s->area / r->area : 0;
+}
+
 double hr_ff_pair(const hr_ff_elem *r, const hr_ff_elem *s, int order, double *spread) {
   if (order <= 0) order = hr_ff_order(r, s);
   hr_vec3 x[HR_FF_CLIP_POINTS];
@@ -519,6 +545,9 @@ double hr_ff_pair(const hr_ff_elem *r, const hr_ff_elem *s, int order, double *s
     lo = fk < lo ? fk : lo;
     hi = fk > hi ? fk : hi;
   }
+  /* the spread stays the receiver points' (how F varies over the receiver) */
+  if (order == 3 && hr_ff_recip_applies(r, s, diameter(r), diameter(s)))
+    f = hr_ff_recip(r, s);
   if (spread) {
     if (order >= 2) {
       *spread = (hi - lo) * SPREAD_EXTRAPOLATE[order];

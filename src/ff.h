@@ -77,9 +77,17 @@ int hr_ff_points(const hr_ff_elem *e, int order, hr_vec3 *x, double *w);
  * Returns their number, 0 where the rule does not apply (use hr_ff_points). */
 int hr_ff_clip_points(const hr_ff_elem *r, const hr_ff_elem *s, hr_vec3 *x, double *w);
 
+/* 1 where F(r <- s) of a near pair (order 3) is better integrated over the source and taken
+ * back by reciprocity (hr_ff_recip): s's diameter 'ds' under half r's 'dr', neither a sliver. */
+int hr_ff_recip_applies(const hr_ff_elem *r, const hr_ff_elem *s, double dr, double ds);
+/* F(r <- s) as A_s / A_r times F(s <- r) by quadrature over s (order 3, or over its part in
+ * front of r's plane where it reaches through: hr_ff_clip_points). */
+double hr_ff_recip(const hr_ff_elem *r, const hr_ff_elem *s);
+
 /* Unoccluded form factor F(r <- s): the area mean over the receiver of hr_ff_point, by the
  * quadrature rule of order 'order' (0: hr_ff_order), or where r reaches through the plane of s,
- * over the part in front (hr_ff_clip_points, whatever 'order'). '*spread' (may be NULL) receives an
+ * over the part in front (hr_ff_clip_points, whatever 'order'); for a small source near a
+ * large receiver, by reciprocity (hr_ff_recip_applies). '*spread' (may be NULL) receives an
  * estimate of how much the point form factor varies over the receiver (largest minus smallest):
  * from the quadrature points, extrapolated to the element's sides, or for one point from the
  * point-to-disk estimate at the receiver's corners. This function can't fail. */

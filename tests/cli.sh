@@ -51,7 +51,7 @@ if "$hrad" --quiet $opts -o "$t/r1" --threads 1 room; then
   it=$(json "$t/r1/stats.json" iterations)
   echo "     room: elements $el links $li iterations $it"
   [ "$el" = "${GOLD_ELEMENTS:-1872}" ] && ok "room elements golden ($el)" || bad "room elements $el (golden ${GOLD_ELEMENTS:-1872})"
-  [ "$li" = "${GOLD_LINKS:-309738}" ] && ok "room links golden ($li)" || bad "room links $li (golden ${GOLD_LINKS:-309738})"
+  [ "$li" = "${GOLD_LINKS:-309507}" ] && ok "room links golden ($li)" || bad "room links $li (golden ${GOLD_LINKS:-309507})"
   [ "$it" = "${GOLD_ITERS:-42}" ] && ok "room iterations golden ($it)" || bad "room iterations $it (golden ${GOLD_ITERS:-42})"
   for n in 2 3 4; do
     "$hrad" --quiet $opts -o "$t/r$n" --threads $n room
