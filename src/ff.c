@@ -538,6 +538,8 @@ double hr_ff_pair(const hr_ff_elem *r, const hr_ff_elem *s, int order, double *s
   int n = hr_ff_clip_points(r, s, x, w);
   if (n > 0) order = 3; /* the spread's extrapolation of order 3 */
   else n = hr_ff_points(r, order, x, w);
+  const int recip = order == 3 && hr_ff_recip_applies(r, s, diameter(r), diameter(s));
+  if (recip && !spread) return hr_ff_recip(r, s); /* the receiver's points only for the spread */
   double f = 0, lo = INFINITY, hi = 0, fx[HR_FF_CLIP_POINTS];
   hr_ff_point_many(x, n, r->n, s, fx);
   for (int k = 0; k < n; k++) {
@@ -546,9 +548,7 @@ double hr_ff_pair(const hr_ff_elem *r, const hr_ff_elem *s, int order, double *s
     lo = fk < lo ? fk : lo;
     hi = fk > hi ? fk : hi;
   }
-  /* the spread stays the receiver points' (how F varies over the receiver) */
-  if (order == 3 && hr_ff_recip_applies(r, s, diameter(r), diameter(s)))
-    f = hr_ff_recip(r, s);
+  if (recip) f = hr_ff_recip(r, s); /* the spread stays the receiver points' */
   if (spread) {
     if (order >= 2) {
       *spread = (hi - lo) * SPREAD_EXTRAPOLATE[order];

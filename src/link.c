@@ -209,8 +209,7 @@ static void link_eval(const hr_solver *s, const int32_t *pool, hr_link *l, int64
 static void link_estimate(const hr_solver *s, const int32_t *pool, hr_link *l, int64_t *rays) {
   assert(l->F == F_LATER && l->ncand != 0);
   const hr_ff_elem gr = hr_elem_geom(s, &s->el[l->r]), gj = hr_elem_geom(s, &s->el[l->s]);
-  double spread;
-  const double fu = hr_ff_pair(&gr, &gj, 0, &spread);
+  const double fu = hr_ff_pair(&gr, &gj, 0, NULL);
   const hr_vf_elem a = vf_elem(s, l->r, &gr), b = vf_elem(s, l->s, &gj);
   const double he = pair_h(s, a, b, pool + l->cand_off, l->ncand, pair_rays(s), STREAM_ESTIMATE,
                            f_small(&gr, &gj, fu), NULL, rays);
@@ -383,9 +382,8 @@ static double recheck(const hr_solver *s, hr_vf_elem ei, hr_vf_elem ej, int k, d
   const double wi = source_weight(s, ei.surf), wj = source_weight(s, ej.surf);
   double pot = ff_bound_near(ei.g, ej.g) * wj, pr = ff_bound_near(ej.g, ei.g) * wi;
   if (!recheck_more(s, pot > pr ? pot : pr, k)) return 0;
-  double sp;
-  pot = hr_ff_pair(ei.g, ej.g, 0, &sp) * wj;
-  pr = hr_ff_pair(ej.g, ei.g, 0, &sp) * wi;
+  pot = hr_ff_pair(ei.g, ej.g, 0, NULL) * wj;
+  pr = hr_ff_pair(ej.g, ei.g, 0, NULL) * wi;
   pot = pot > pr ? pot : pr;
   for (int n = k, round = 0; recheck_more(s, pot, n); n *= 2, round++) {
     const double h = pair_h(s, ei, ej, NULL, -1, n, STREAM_RECHECK + round, fs, blk, rays);

@@ -620,13 +620,13 @@ hr_status hr_solver_set_balance(hr_solver *s, int method, double alpha, double i
   return HR_OK;
 }
 
-/* Progress of the convergence at BF_low, after an iteration at 'bf_e' that changed B by at
- * most 'change': how far the change has fallen from the first one at BF_low toward b_eps, on a
+/* Progress of the convergence at BF_low, after an iteration (advance not yet run) that changed
+ * B by at most 'change': how far the change has fallen from the first one at BF_low toward b_eps, on a
  * log scale (the iteration contracts the error by a factor, so equal steps on it are about
  * equal numbers of iterations), at most 0.99 until the run ends, never decreasing. Without it
  * a run of one level (the defaults) reported 0% until its end. */
-static void track_convergence(hr_solver *s, double bf_e, double change) {
-  if (!(bf_e <= s->opt.bf_low * (1 + 1e-12)) || !(change > 0)) return;
+static void track_convergence(hr_solver *s, double change) {
+  if (!at_bf_low(s) || !(change > 0)) return;
   if (!(s->conv_first > 0)) s->conv_first = change;
   const double span = log(s->conv_first / s->b_eps);
   const double f = span > 0 ? log(s->conv_first / change) / span : 1;
@@ -684,7 +684,7 @@ hr_status hr_solver_run(hr_solver *s, hr_iter_fn cb, void *ud, hr_err *err) {
     double change = 0;
     int64_t nnew = 0;
     if ((st = iterate(s, &change, &nnew, err)) != HR_OK) return st;
-    track_convergence(s, bf_e, change);
+    track_convergence(s, change);
     advance(s, change, nnew, 0);
     if (s->migrate_seed && !s->done && (st = test_migrate(s, err)) != HR_OK) return st;
     if (!s->done && (st = maybe_balance(s, err)) != HR_OK) return st;

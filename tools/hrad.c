@@ -236,13 +236,13 @@ static const char *phase_name(int phase) {
                                    : "writing outputs";
 }
 
-/* "12.3 s, about 9 s left" for 'secs' spent on 'fraction' of a phase; "12.3 s" alone for a
- * fraction of 0. The solve's share (the BF_e schedule and the convergence at BF_low) is not a
- * share of its time, so it gets no estimate: on the conference room it would have said 5 min
- * left with one to go. */
-static void eta_text(char *out, size_t n, double secs, double fraction) {
+/* "12.3 s, about 9 s left" for 'secs' spent on 'fraction' of 'phase'; "12.3 s" alone for the
+ * solve, whose share (the BF_e schedule and the convergence at BF_low) is not a share of its
+ * time: on the conference room an estimate would have said 5 min left with one to go. */
+static void eta_text(char *out, size_t n, int phase, double secs, double fraction) {
   int k = snprintf(out, n, "%.1f s", secs);
-  if (k < 0 || (size_t)k >= n || !(fraction > 0.02) || fraction >= 1) return;
+  if (k < 0 || (size_t)k >= n || phase == HR_PHASE_SOLVE || !(fraction > 0.02) || fraction >= 1)
+    return;
   const double left = secs * (1 - fraction) / fraction;
   if (left < 100)
     snprintf(out + k, n - (size_t)k, ", about %.0f s left", ceil(left));
@@ -261,7 +261,7 @@ static void tty_line(char *out, size_t n, int phase, double fraction, double sec
   const int full = (int)(fraction * BAR_WIDTH);
   for (int i = 0; i < BAR_WIDTH; i++) bar[i] = i < full ? '#' : '.';
   bar[BAR_WIDTH] = 0;
-  eta_text(eta, sizeof eta, secs, phase == HR_PHASE_SOLVE ? 0 : fraction);
+  eta_text(eta, sizeof eta, phase, secs, fraction);
   snprintf(out, n, "%-15s  [%s] %3.0f%%  %s", phase_name(phase), bar, floor(100 * fraction),
            eta);
 }
@@ -283,7 +283,7 @@ static void on_progress(void *ud, hr_phase phase, double fraction) {
     progress_draw();
   } else if (fraction < 1 && t - g_prog.t_plain >= PLAIN_EVERY) {
     char eta[64];
-    eta_text(eta, sizeof eta, secs, phase == HR_PHASE_SOLVE ? 0 : fraction);
+    eta_text(eta, sizeof eta, phase, secs, fraction);
     fprintf(stderr, "hrad: %s %.0f%% (%s)\n", phase_name(phase), floor(100 * fraction),
             eta);
     g_prog.t_plain = t;
