@@ -23,7 +23,7 @@
 #include <string.h>
 
 #define MAGIC "HRADCKP1"
-#define VERSION 8u
+#define VERSION 9u
 
 /* ---------------------------------------------------------------- hashing */
 
@@ -57,7 +57,7 @@ static uint64_t scene_hash(const hr_scene *sc) {
  * through whether the solver clusters). */
 static uint64_t options_hash(const hr_options *o, int nsurfs) {
   const double d[] = {o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max,
-                      o->bf_first};
+                      o->bf_first, o->importance};
   const int64_t n[] = {o->relax, o->relax_links, o->rays, (int64_t)o->seed, o->extrapolate,
                        hr_cluster_wanted(o, nsurfs)};
   return hash_bytes(hash_bytes(0x0b7, d, sizeof d), n, sizeof n);

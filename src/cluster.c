@@ -77,7 +77,9 @@ struct hr_clusters {
   double *rho;        /* per cluster: largest reflectance channel of its surfaces */
   double (*Bm)[3];    /* per cluster: area-weighted mean of its surfaces' sent radiosity */
   double *bhi, *blo;  /* per cluster: range of its surfaces' radiosities (largest channel) */
-  double *bref;       /* per cluster: area-weighted mean reference radiosity of its surfaces */
+  double *bref;       /* per cluster: area-weighted mean reference radiosity of its surfaces,
+                         without their slacks */
+  double *slack;      /* per cluster: its slack by its area (hr_slack) */
   /* per cluster: incident field, A_l-weighted, from near sources [0] (taken by each surface
    * with Y_lm(n)) and far ones [1] (taken with its transfer vector) */
   double (*L)[2][NCH][9];
@@ -363,6 +365,7 @@ static void summarise(hr_solver *s, hr_clusters *cl) {
     }
     nd->c = v3_scale(v3_add(nd->bmin, nd->bmax), 0.5);
     nd->rad = 0.5 * v3_len(v3_sub(nd->bmax, nd->bmin));
+    cl->slack[c] = hr_slack(s, nd->area);
     normal_cone(cl, nd->lo, nd->hi, &nd->na, &nd->nang);
   }
 }
@@ -385,9 +388,10 @@ static hr_status build_tree(hr_solver *s, hr_clusters *cl) {
   cl->bhi = calloc(m, sizeof *cl->bhi);
   cl->blo = calloc(m, sizeof *cl->blo);
   cl->bref = calloc(m, sizeof *cl->bref);
+  cl->slack = malloc(m * sizeof *cl->slack);
   cl->L = calloc(m, sizeof *cl->L);
   if (!cen || !cl->perm || !cl->cum || !cl->srad || !cl->sp || !cl->sg || !cl->sh || !cl->node ||
-      !cl->nsh || !cl->rho || !cl->Bm || !cl->bhi || !cl->blo || !cl->bref || !cl->L) {
+      !cl->nsh || !cl->rho || !cl->Bm || !cl->bhi || !cl->blo || !cl->bref || !cl->slack || !cl->L) {
     free(cen);
     return HR_ERR_NOMEM;
   }
@@ -473,10 +477,10 @@ static void node_recv(const hr_solver *s, int32_t id, double *rho, double *bref)
   const double floor = HR_BREF_FLOOR * s->unit;
   if (id >= 0) {
     *rho = s->rho_max[id];
-    *bref = cl->initial ? floor : s->bref[id];
+    *bref = cl->initial ? floor * hr_slack(s, s->el[id].area) : s->bref[id]; /* (with its slack) */
   } else {
     *rho = cl->rho[-1 - id];
-    *bref = cl->initial ? floor : cl->bref[-1 - id];
+    *bref = (cl->initial ? floor : cl->bref[-1 - id]) * cl->slack[-1 - id];
   }
 }
 
@@ -2069,7 +2073,7 @@ void hr_cluster_pull(hr_solver *s) {
       if (id >= 0) {
         a = s->el[id].area, b = s->Bs[id];
         const double m = max3(b), v = s->bvar[id] > 0 ? s->bvar[id] : 0; /* leaf: 0 */
-        h = m + v, l = m - v > 0 ? m - v : 0, r = s->bref[id];
+        h = m + v, l = m - v > 0 ? m - v : 0, r = s->bref[id] / hr_slack(s, a);
       } else {
         const int32_t k = -1 - id;
         a = cl->node[k].area, b = cl->Bm[k], h = cl->bhi[k], l = cl->blo[k], r = cl->bref[k];
@@ -2255,7 +2259,7 @@ void hr_cluster_free(hr_clusters **pc) {
   if (!cl) return;
   free(cl->node), free(cl->perm), free(cl->cum), free(cl->sp), free(cl->srad), free(cl->nsh);
   free(cl->sg), free(cl->sh);
-  free(cl->rho);
+  free(cl->rho), free(cl->slack);
   free(cl->Bm), free(cl->bhi), free(cl->blo), free(cl->bref), free(cl->L), free(cl->tq);
   free(cl->nsht), free(cl->lray), free(cl->links);
   free(cl->pos), free(cl->crays), free(cl->cown);

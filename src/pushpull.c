@@ -23,7 +23,7 @@ static inline double max3(const double *v) {
   return x > v[2] ? x : v[2];
 }
 
-/* g = down + what 'idx' gathered; sets its bref. */
+/* g = down + what 'idx' gathered; sets its bref (times its slack, solver_impl.h). */
 static void pp_down(hr_solver *s, int32_t idx, const double down[5], double g[5]) {
   g[0] = down[0] + s->G[idx][0];
   g[1] = down[1] + s->G[idx][1];
@@ -31,7 +31,7 @@ static void pp_down(hr_solver *s, int32_t idx, const double down[5], double g[5]
   g[3] = down[3] + s->Gu[idx];
   g[4] = down[4] + s->Gf[idx];
   const double floor = HR_BREF_FLOOR * s->unit, br = s->rho_max[idx] * g[3];
-  s->bref[idx] = br > floor ? br : floor;
+  s->bref[idx] = (br > floor ? br : floor) * hr_slack(s, s->el[idx].area);
 }
 
 /* Extrapolation (docs/design.md, "Extrapolation"). Gathering and push-pull are a Jacobi step

@@ -99,11 +99,12 @@ hr_status hr_report_json(const char *path, const hr_solver *s, const hr_options 
           "  \"options\": {\"bf_low\": %g, \"bf_start\": %g, \"bf_first\": %g, "
           "\"bf_factor\": %g, \"area_min\": %g, \"b_eps\": %g, \"b_max\": %g, "
           "\"relax\": %s, \"rays\": %d, \"seed\": %llu, \"extrapolate\": %s, "
-          "\"cluster\": \"%s\"},\n",
+          "\"cluster\": \"%s\", \"importance\": %g},\n",
           o->bf_low, o->bf_start, o->bf_first, o->bf_factor, o->area_min, o->b_eps, o->b_max,
           o->relax ? "true" : "false", o->rays, (unsigned long long)o->seed,
           o->extrapolate ? "true" : "false",
-          o->cluster == HR_CLUSTER_ON ? "on" : o->cluster == HR_CLUSTER_OFF ? "off" : "auto");
+          o->cluster == HR_CLUSTER_ON ? "on" : o->cluster == HR_CLUSTER_OFF ? "off" : "auto",
+          o->importance);
   fprintf(f,
           "  \"time_s\": {\"init_graph\": %.6f, \"refine\": %.6f, \"gather\": %.6f, "
           "\"push_pull\": %.6f, \"balance\": %.6f, \"total\": %.6f}\n",

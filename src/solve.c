@@ -49,6 +49,10 @@ void hr_options_default(hr_options *o) {
   o->max_iters = 1000;
   o->max_links = 5e7;
   o->extrapolate = 1;
+  /* receivers below A_e / 4 take (A_e / 4 / A)^0.5 times the tolerance: the conference room
+   * 4.07% -> 4.52% RMS against the path tracer in 0.55 of the time, a better trade than
+   * --bf-low gives (docs/design.md, "Importance") */
+  o->importance = 0.5;
 }
 
 /* Area-weighted mean emitted radiosity (largest channel): the radiosity unit before any light
@@ -69,7 +73,7 @@ static double emitted_mean(const hr_scene *sc, double area) {
 
 static hr_status check_options(const hr_options *o, hr_err *err) {
   const double d[] = {o->bf_low, o->bf_start, o->bf_factor, o->area_min, o->b_eps, o->b_max,
-                      o->max_links, o->bf_first};
+                      o->max_links, o->bf_first, o->importance};
   for (size_t k = 0; k < sizeof d / sizeof d[0]; k++)
     if (!isfinite(d[k])) return hr_err_set(err, HR_ERR_INVALID, "options must be finite numbers");
   if (!(o->bf_low > 0)) return hr_err_set(err, HR_ERR_INVALID, "--bf-low must be > 0");
@@ -78,6 +82,8 @@ static hr_status check_options(const hr_options *o, hr_err *err) {
   if (!(o->bf_factor > 1)) return hr_err_set(err, HR_ERR_INVALID, "--bf-factor must be > 1");
   if (!(o->bf_first >= 0))
     return hr_err_set(err, HR_ERR_INVALID, "--bf-first must be >= 0 (0: --bf-start)");
+  if (!(o->importance >= 0 && o->importance <= 1))
+    return hr_err_set(err, HR_ERR_INVALID, "--importance must be in [0, 1] (0: off)");
   if (!(o->area_min >= 0 && o->area_min < 1))
     return hr_err_set(err, HR_ERR_INVALID, "--area-min must be in [0, 1) (0: BF_low)");
   if (!(o->b_eps >= 0))

@@ -815,6 +815,9 @@ static void usage(void) {
       "  --bf-factor X        BF_e is divided by X per level (> 1, default %g)\n"
       "  --area-min X         minimum element area A_e, relative to the total area\n"
       "                       (0 <= X < 1, default 0: equal to BF_low)\n"
+      "  --importance E       a polygon smaller than the finest mesh element (A_e / 4) may\n"
+      "                       take errors (A_e / 4 / A)^E times larger: it weighs that much\n"
+      "                       less in the picture (0 <= E <= 1, default %g; 0: all alike)\n"
       "  --b-eps X            convergence: max change of B below X (>= 0, default 0:\n"
       "                       equal to BF_low, at most B_max)\n"
       "  --b-max X            B_max of the relaxed inner loop (>= B_eps, default %g)\n"
@@ -835,7 +838,7 @@ static void usage(void) {
       "Exit status: 0 done, 1 bad input or a failure (nothing written), 2 usage error;\n"
       "interrupted by a signal: 128+N (Ctrl-C: 130; a second Ctrl-C stops at once).\n",
       scenes, MIN_SIDE, MAX_SIDE, MAX_PIXELS, CKPT_EVERY, MIN_EMIT, MAX_EMIT, d.bf_low,
-      d.bf_factor, d.b_max, d.rays, (unsigned long long)d.seed, MAX_THREADS, INT_MAX,
+      d.bf_factor, d.importance, d.b_max, d.rays, (unsigned long long)d.seed, MAX_THREADS, INT_MAX,
       d.max_iters, d.max_links);
 }
 
@@ -1076,6 +1079,11 @@ static void parse_args(cli *c, int argc, char **argv) {
       const char *v = NEXT();
       if (!((o->bf_start = parse_real(a, v)) >= 0))
         die_usage("--bf-start must be >= 0, got '%s'", v);
+    } else if (!strcmp(a, "--importance")) {
+      const char *v = NEXT();
+      o->importance = parse_real(a, v);
+      if (!(o->importance >= 0 && o->importance <= 1))
+        die_usage("--importance must be in [0, 1], got '%s'", v);
     } else if (!strcmp(a, "--bf-first")) {
       const char *v = NEXT();
       if (!((o->bf_first = parse_real(a, v)) >= 0))
