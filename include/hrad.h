@@ -264,7 +264,8 @@ typedef struct hr_options {
                          without new links (docs/design.md, "Extrapolation"); default on */
   double bf_first;    /* BF_e of a clustered solve's linking before the first gather, when
                          only the emitters have light: the resolution of the direct light
-                         (may be below bf_low); 0: the first level's BF_e (bf_start) */
+                         (may be below bf_low); 0: a quarter of the first level's BF_e
+                         (bf_start) */
   double importance;  /* E in [0, 1]: a receiver smaller than the finest regular element
                          (A_e / 4) may take errors (A_e / 4 / A)^E times larger, for it weighs
                          that much less in the picture and in area-weighted error; 0: every

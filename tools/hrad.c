@@ -811,7 +811,7 @@ static void usage(void) {
       "                       equal to BF_low, one level; the paper's schedule: e.g. 0.05)\n"
       "  --bf-first X         BF_e of a clustered solve's first linking, before any light is\n"
       "                       gathered: the direct light's resolution (>= 0, may be below\n"
-      "                       BF_low; default 0: the first BF_e)\n"
+      "                       BF_low; default 0: a quarter of the first BF_e)\n"
       "  --bf-factor X        BF_e is divided by X per level (> 1, default %g)\n"
       "  --area-min X         minimum element area A_e, relative to the total area\n"
       "                       (0 <= X < 1, default 0: equal to BF_low)\n"
