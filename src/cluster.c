@@ -22,7 +22,8 @@
  *  - Refinement: a link is kept when rho_R F_max (B_S k + dB_S) <= BF_e bref_R, with F_max =
  *    min(1, A_S / (pi d^2)) for the gap d between the bounding spheres, k = min(1, (r_R + r_S)
  *    / d) how much the kernel varies over the two, B_S the source's mean and dB_S the range of
- *    its surfaces' radiosities; else the larger cluster opens. Two surfaces make an element
+ *    its surfaces' radiosities, bref_R the receiver's reference radiosity times its slack
+ *    (--importance, hr_slack); else the larger cluster opens. Two surfaces make an element
  *    link (link.c) and refine from then on as elements do. */
 #include "cluster.h"
 #include "mpi/dist.h"
