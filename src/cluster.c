@@ -392,7 +392,8 @@ static hr_status build_tree(hr_solver *s, hr_clusters *cl) {
   cl->slack = malloc(m * sizeof *cl->slack);
   cl->L = calloc(m, sizeof *cl->L);
   if (!cen || !cl->perm || !cl->cum || !cl->srad || !cl->sp || !cl->sg || !cl->sh || !cl->node ||
-      !cl->nsh || !cl->rho || !cl->Bm || !cl->bhi || !cl->blo || !cl->bref || !cl->slack || !cl->L) {
+      !cl->nsh || !cl->rho || !cl->Bm || !cl->bhi || !cl->blo || !cl->bref || !cl->slack ||
+      !cl->L) {
     free(cen);
     return HR_ERR_NOMEM;
   }

@@ -636,10 +636,10 @@ hr_status hr_solver_set_balance(hr_solver *s, int method, double alpha, double i
 }
 
 /* Progress of the convergence at BF_low, after an iteration (advance not yet run) that changed
- * B by at most 'change': how far the change has fallen from the first one at BF_low toward b_eps, on a
- * log scale (the iteration contracts the error by a factor, so equal steps on it are about
- * equal numbers of iterations), at most 0.99 until the run ends, never decreasing. Without it
- * a run of one level (the defaults) reported 0% until its end. */
+ * B by at most 'change': how far the change has fallen from the first one at BF_low toward b_eps,
+ * on a log scale (the iteration contracts the error by a factor, so equal steps on it are about
+ * equal numbers of iterations), at most 0.99 until the run ends, never decreasing. Without it a
+ * run of one level (the defaults) reported 0% until its end. */
 static void track_convergence(hr_solver *s, double change) {
   if (!at_bf_low(s) || !(change > 0)) return;
   if (!(s->conv_first > 0)) s->conv_first = change;

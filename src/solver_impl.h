@@ -26,15 +26,6 @@
  * that elements in the dark are not refined for light nobody sees (pushpull.c, cluster.c). */
 #define HR_BREF_FLOOR 0.1
 
-/* The slack of a receiver of this area, by which the refinement oracles multiply its tolerance
- * (its reference radiosity bref): 1 down to a regular leaf's area A_e / 4, (A_e / 4 / area)^E
- * below it, E = --importance (docs/design.md, "Importance"). A degenerate receiver gets 1. */
-#define hr_slack(s, area) hr_slack_of((s)->area_min, (s)->opt.importance, (area))
-static inline double hr_slack_of(double area_min, double e, double area) {
-  const double a0 = 0.25 * area_min;
-  return e > 0 && area > 0 && area < a0 ? pow(a0 / area, e) : 1;
-}
-
 typedef struct hr_clusters hr_clusters;
 
 /* Loops shorter than this run on one thread: a parallel region costs more than the work. */
@@ -233,6 +224,14 @@ struct hr_solver {
 
 enum { HR_PHASE_NONE, HR_PHASE_INIT, HR_PHASE_REFINE, HR_PHASE_PUSHPULL, HR_PHASE_CLUSTER };
 /* 1 if the test hook makes this rank fail now, in 'phase'. */
+/* The slack of a receiver of this area, by which the refinement oracles multiply its tolerance
+ * (its reference radiosity bref): 1 down to a regular leaf's area A_e / 4, (A_e / 4 / area)^E
+ * below it, E = --importance (docs/design.md, "Importance"). A degenerate receiver gets 1. */
+static inline double hr_slack(const hr_solver *s, double area) {
+  const double a0 = 0.25 * s->area_min, e = s->opt.importance;
+  return e > 0 && area > 0 && area < a0 ? pow(a0 / area, e) : 1;
+}
+
 static inline int hr_test_fail(const hr_solver *s, int phase) {
   const int it = s->iterations + 1;
   return s->fail_phase == phase && s->rank == s->fail_rank &&

@@ -304,15 +304,13 @@ static void importance(void) {
   CHECK(same, "cornell: --importance changed the light although no polygon is below A_e / 4");
   hr_solver_destroy(&a);
   hr_solver_destroy(&b);
-  for (double bad = -0.1; bad < 2; bad += 1.6) {
-    o.importance = bad;
+  const double bad[] = {-0.1, 1.5, NAN};
+  for (int k = 0; k < 3; k++) {
+    o.importance = bad[k];
     hr_solver *x = NULL;
     CHECK(hr_solver_create(s, &o, &x, &err) == HR_ERR_INVALID && !x, "importance %g accepted",
-          bad);
+          bad[k]);
   }
-  o.importance = NAN;
-  hr_solver *x = NULL;
-  CHECK(hr_solver_create(s, &o, &x, &err) == HR_ERR_INVALID && !x, "importance NaN accepted");
   hr_scene_destroy(&s);
 
   s = tess_box(0.5, 1, 12, 2, 3, 4);

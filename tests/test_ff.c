@@ -80,6 +80,15 @@ static hr_ff_elem rnd_elem(hr_vec3 c, hr_vec3 n, double size) {
   return e;
 }
 
+/* 1 when every corner of s lies in front of r's plane (through the origin) and every corner of
+ * r in front of s's: a pair of elements wholly facing each other. */
+static int facing(const hr_ff_elem *r, const hr_ff_elem *s) {
+  int ok = 1;
+  for (int v = 0; v < 4; v++)
+    ok &= v3_dot(s->p[v], r->n) > 0 && v3_dot(v3_sub(r->p[v], s->p[0]), s->n) > 0;
+  return ok;
+}
+
 static hr_vec3 rnd_dir(void) {
   for (;;) {
     hr_vec3 v = tv(2 * rnd() - 1, 2 * rnd() - 1, 2 * rnd() - 1);
@@ -125,7 +134,8 @@ static void kernels(void) {
         double r2 = v3_dot(y, y), cx = v3_dot(nx, y) / sqrt(r2), cy = 1 / sqrt(r2);
         if (cx > 0) acc += cx * cy / (M_PI * r2) / ((double)m * m);
       }
-    CHECK_REL(hr_ff_point(tv(0, 0, 0), nx, &s), acc, 1e-5, "point kernel, source clipped by the tangent plane");
+    CHECK_REL(hr_ff_point(tv(0, 0, 0), nx, &s), acc, 1e-5,
+              "point kernel, source clipped by the tangent plane");
     CHECK(hr_ff_point(tv(0, 0, 2), tv(0, 0, 1), &s) == 0, "a point behind the source gets light");
   }
   /* Pairs at a clearance of at least their size: within 0.5% of a converged reference. */
@@ -138,9 +148,7 @@ static void kernels(void) {
     hr_vec3 ns = rnd_dir();
     if (v3_dot(ns, d) > -0.3) continue;
     hr_ff_elem s = rnd_elem(v3_scale(d, 2.5 + 3 * rnd()), ns, 0.5 + rnd());
-    int ok = 1;
-    for (int v = 0; v < 4; v++) ok &= v3_dot(s.p[v], r.n) > 0 && v3_dot(v3_sub(r.p[v], s.p[0]), s.n) > 0;
-    if (!ok) continue;
+    if (!facing(&r, &s)) continue;
     double f = hr_ff_pair(&r, &s, 0, NULL), ref = hr_ff_ref_poly_poly(r.p, 4, s.p, 4, 6, 6);
     double e = fabs(f - ref) / ref;
     worst = e > worst ? e : worst;
@@ -343,9 +351,7 @@ static void small_sources(void) {
     if (v3_dot(d, nr) < 0.3 || v3_dot(ns, d) > -0.3) continue;
     const double size = 0.15 + 0.2 * rnd();
     hr_ff_elem s = rnd_elem(v3_scale(d, 0.5 * (1 + size) + 0.1), ns, size);
-    int ok = 1;
-    for (int v = 0; v < 4; v++) ok &= v3_dot(s.p[v], r.n) > 0 && v3_dot(v3_sub(r.p[v], s.p[0]), s.n) > 0;
-    if (!ok || hr_ff_order(&r, &s) != 3) continue;
+    if (!facing(&r, &s) || hr_ff_order(&r, &s) != 3) continue;
     const double f = hr_ff_pair(&r, &s, 0, NULL), ref = hr_ff_ref_poly_poly(r.p, 4, s.p, 4, 32, 6);
     const double e = fabs(f - ref) / ref;
     worst = e > worst ? e : worst;
