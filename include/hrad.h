@@ -82,6 +82,8 @@ typedef struct hr_surface {
   double area;
   int material;   /* index into scene->mats */
   int poly;       /* index of the input polygon it came from (row of surfaces.csv) */
+  int cut;        /* 1: a piece of a larger surface that hr_scene_cut_contacts cut (it takes the
+                     importance, --importance, of its polygon, not of the piece); else 0 */
 } hr_surface;
 
 typedef struct hr_camera {
@@ -157,6 +159,20 @@ int hr_scene_poly_material(const hr_scene *s, int poly);
  * in metres with f = 0.001. Emission (W/m^2) is per area and unchanged. HR_ERR_INVALID for a
  * bad factor or coordinates that would exceed HR_COORD_MAX. */
 hr_status hr_scene_scale(hr_scene *s, double f);
+/* What hr_scene_cut_contacts did: surfaces cut, lines cut along, surfaces they became. */
+typedef struct hr_cut_stats {
+  int surfaces, lines, pieces;
+} hr_cut_stats;
+/* Cuts every surface of at least len x len area along the lines where other surfaces at least
+ * len tall stand on it or pass through it in front (a pillar's wall on a floor; not a chair's
+ * runner), where there is open space on both sides of the line (not under a closed box: the solver's open fractions
+ * deal with that), so that no element the solver makes from it carries light across such a
+ * wall. Contacts within len / 256 of the plane, lines whose contacts cover at least len / 2,
+ * no piece narrower than len / 2. The pieces are convex quads and triangles with the surface's
+ * material and polygon (hr_surface.cut = 1), so outputs per polygon keep their rows. The CLI
+ * passes len = sqrt(A_e) (--cut-contacts, docs/design.md "Contact cuts"). Deterministic;
+ * HR_ERR_INVALID for a len not finite and > 0, HR_ERR_NOMEM (the scene unchanged). */
+hr_status hr_scene_cut_contacts(hr_scene *s, double len, hr_cut_stats *stats);
 
 /* Result of adding a polygon. */
 typedef enum {

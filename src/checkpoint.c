@@ -23,7 +23,7 @@
 #include <string.h>
 
 #define MAGIC "HRADCKP1"
-#define VERSION 9u
+#define VERSION 10u
 
 /* ---------------------------------------------------------------- hashing */
 
@@ -45,6 +45,7 @@ static uint64_t scene_hash(const hr_scene *sc) {
     h = hash_bytes(h, &f->nverts, sizeof f->nverts);
     h = hash_bytes(h, f->v, sizeof f->v[0] * (size_t)f->nverts);
     h = hash_bytes(h, &f->material, sizeof f->material);
+    h = hash_bytes(h, &f->cut, sizeof f->cut);
   }
   for (int m = 0; m < sc->nmats; m++) {
     h = hash_bytes(h, sc->mats[m].rho, sizeof sc->mats[m].rho);

@@ -479,7 +479,8 @@ static void node_recv(const hr_solver *s, int32_t id, double *rho, double *bref)
   const double floor = HR_BREF_FLOOR * s->unit;
   if (id >= 0) {
     *rho = s->rho_max[id];
-    *bref = cl->initial ? floor * hr_slack(s, s->el[id].area) : s->bref[id]; /* (with its slack) */
+    /* s->bref[id] holds its slack already */
+    *bref = cl->initial ? floor * hr_slack(s, hr_elem_imp_area(s, id)) : s->bref[id];
   } else {
     *rho = cl->rho[-1 - id];
     *bref = (cl->initial ? floor : cl->bref[-1 - id]) * cl->slack[-1 - id];
@@ -2075,7 +2076,8 @@ void hr_cluster_pull(hr_solver *s) {
       if (id >= 0) {
         a = s->el[id].area, b = s->Bs[id];
         const double m = max3(b), v = s->bvar[id] > 0 ? s->bvar[id] : 0; /* leaf: 0 */
-        h = m + v, l = m - v > 0 ? m - v : 0, r = s->bref[id] / hr_slack(s, a);
+        h = m + v, l = m - v > 0 ? m - v : 0;
+        r = s->bref[id] / hr_slack(s, hr_elem_imp_area(s, id));
       } else {
         const int32_t k = -1 - id;
         a = cl->node[k].area, b = cl->Bm[k], h = cl->bhi[k], l = cl->blo[k], r = cl->bref[k];

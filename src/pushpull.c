@@ -31,7 +31,7 @@ static void pp_down(hr_solver *s, int32_t idx, const double down[5], double g[5]
   g[3] = down[3] + s->Gu[idx];
   g[4] = down[4] + s->Gf[idx];
   const double floor = HR_BREF_FLOOR * s->unit, br = s->rho_max[idx] * g[3];
-  s->bref[idx] = (br > floor ? br : floor) * hr_slack(s, s->el[idx].area);
+  s->bref[idx] = (br > floor ? br : floor) * hr_slack(s, hr_elem_imp_area(s, idx));
 }
 
 /* Extrapolation (docs/design.md, "Extrapolation"). Gathering and push-pull are a Jacobi step

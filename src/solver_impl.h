@@ -232,6 +232,17 @@ static inline double hr_slack(const hr_solver *s, double area) {
   return e > 0 && area > 0 && area < a0 ? pow(a0 / area, e) : 1;
 }
 
+/* The area by which element 'idx' takes its slack: its own, but the root of a piece of a
+ * surface cut along contact lines (hr_surface.cut) counts its polygon's: cutting does not make a
+ * floor less important. */
+static inline double hr_elem_imp_area(const hr_solver *s, int32_t idx) {
+  const hr_elem *e = &s->el[idx];
+  const hr_surface *f = &s->scene->surfs[e->surf];
+  if (e->parent < 0 && f->cut)
+    return fmax(e->area, s->scene->poly_area[f->poly]);
+  return e->area;
+}
+
 static inline int hr_test_fail(const hr_solver *s, int phase) {
   const int it = s->iterations + 1;
   return s->fail_phase == phase && s->rank == s->fail_rank &&

@@ -110,6 +110,8 @@ typedef struct cli {
   int viewer;           /* three.js is installed: write viewer.html */
   unsigned outputs;     /* --outputs: OUT_* bits of the files to write */
   double scale;         /* --scale S: coordinates times S (1: as read) */
+  int cut_contacts;     /* --cut-contacts on|off (hr_scene_cut_contacts at sqrt(A_e)) */
+  hr_cut_stats cuts;    /* what it did */
   const char *list_mats; /* --list-materials FILE: print its material names and exit */
   FILE *rep;            /* the --verify reports, shown on stderr once the set is committed (a
                            failed run prints only its one-line error) */
@@ -800,6 +802,9 @@ static void usage(void) {
       "  --list-materials FILE  print the material names of scene FILE, one per line, and exit\n"
       "  --scale S            multiply every coordinate by S (1e-9..1e9; e.g. 0.001 for a scene\n"
       "                       in millimetres, to get metres); radiosity is per m^2 of the result\n"
+      "  --cut-contacts on|off  cut large surfaces along the lines where walls stand on them\n"
+      "                       with open space on both sides, so that no mesh element\n"
+      "                       carries light through a wall (default on)\n"
       "\n"
       "Solver (thresholds are dimensionless: errors relative to the light each element\n"
       "receives, B relative to the scene's mean radiosity, areas relative to the total area,\n"
@@ -1047,6 +1052,7 @@ static void parse_args(cli *c, int argc, char **argv) {
   c->balance_method = HR_BALANCE_ANNEAL, c->balance_alpha = 0.5, c->balance_idle = 0.1;
   c->outputs = OUT_CSV | OUT_JSON | OUT_PNG | OUT_PLY | OUT_GLB | OUT_VIEWER;
   c->scale = 1;
+  c->cut_contacts = 1;
   int opts_done = 0;
   for (int i = 1; i < argc; i++) {
     const char *a = argv[i];
@@ -1110,6 +1116,11 @@ static void parse_args(cli *c, int argc, char **argv) {
       else if (!strcmp(v, "on")) o->cluster = HR_CLUSTER_ON;
       else if (!strcmp(v, "off")) o->cluster = HR_CLUSTER_OFF;
       else die_usage("--cluster must be auto, on or off, got '%s'", v);
+    } else if (!strcmp(a, "--cut-contacts")) {
+      const char *v = NEXT();
+      if (!strcmp(v, "on")) c->cut_contacts = 1;
+      else if (!strcmp(v, "off")) c->cut_contacts = 0;
+      else die_usage("--cut-contacts must be on or off, got '%s'", v);
     } else if (!strcmp(a, "--max-pairs")) {
       const char *v = NEXT();
       if (!((o->max_links = parse_real(a, v)) >= 0))
@@ -2124,6 +2135,10 @@ int main(int argc, char **argv) {
   apply_emit(&c, scene);
   free(c.emit_name);
   free(c.emit_rgb);
+  if (c.cut_contacts) {
+    double ae = (c.opt.area_min > 0 ? c.opt.area_min : c.opt.bf_low) * hr_scene_total_area(scene);
+    if (hr_scene_cut_contacts(scene, sqrt(ae), &c.cuts) != HR_OK) fail("out of memory");
+  }
   c.scene = scene;
   check_white(&c);
   if (c.have_camera) c.cam = c.camera;
@@ -2154,6 +2169,10 @@ int main(int argc, char **argv) {
             "(%.6g %.6g %.6g)-(%.6g %.6g %.6g)\n",
             scene->name, scene->npolys, scene->nsurfs, scene->nmats, hr_scene_total_area(scene),
             lo.x, lo.y, lo.z, hi.x, hi.y, hi.z);
+    if (c.cuts.surfaces > 0)
+      fprintf(stderr, "hrad: cut %d surface%s along %d contact line%s into %d\n",
+              c.cuts.surfaces, c.cuts.surfaces == 1 ? "" : "s", c.cuts.lines,
+              c.cuts.lines == 1 ? "" : "s", c.cuts.pieces);
   }
   c.ckpt_last = now_s();
   progress_start(s, !c.quiet && !c.no_progress);
