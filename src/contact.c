@@ -189,27 +189,32 @@ static void make_frame(const hr_surface *sf, frame *f, piece *outline) {
 static double cross2(p2 a, p2 b) { return a.x * b.y - a.y * b.x; }
 static p2 sub2(p2 a, p2 b) { return (p2){a.x - b.x, a.y - b.y}; }
 
-/* Clips segment a-b to convex counter-clockwise polygon 'pc'; 0 if nothing is left. */
-static int clip_seg(const piece *pc, p2 *a, p2 *b) {
-  double t0 = 0, t1 = 1;
-  p2 d = sub2(*b, *a);
+/* Narrows [*t0, *t1] to the parameters t of o + t d inside convex counter-clockwise polygon
+ * 'pc' (Cyrus-Beck); 0 if nothing is left. */
+static int clip_param(const piece *pc, p2 o, p2 d, double *t0, double *t1) {
   for (int i = 0; i < pc->n; i++) {
     p2 e = sub2(pc->v[(i + 1) % pc->n], pc->v[i]);
     /* inside: cross(e, p - v_i) >= 0 */
-    double num = cross2(e, sub2(*a, pc->v[i])), den = cross2(e, d);
+    double num = cross2(e, sub2(o, pc->v[i])), den = cross2(e, d);
     if (den == 0) {
       if (num < 0) return 0;
       continue;
     }
     double t = -num / den;
     if (den > 0) {
-      if (t > t0) t0 = t;
-    } else if (t < t1) {
-      t1 = t;
+      if (t > *t0) *t0 = t;
+    } else if (t < *t1) {
+      *t1 = t;
     }
-    if (t0 >= t1) return 0;
   }
-  p2 a0 = *a;
+  return *t0 < *t1;
+}
+
+/* Clips segment a-b to convex counter-clockwise polygon 'pc'; 0 if nothing is left. */
+static int clip_seg(const piece *pc, p2 *a, p2 *b) {
+  double t0 = 0, t1 = 1;
+  p2 a0 = *a, d = sub2(*b, *a);
+  if (!clip_param(pc, a0, d, &t0, &t1)) return 0;
   *a = (p2){a0.x + t0 * d.x, a0.y + t0 * d.y};
   *b = (p2){a0.x + t1 * d.x, a0.y + t1 * d.y};
   return 1;
@@ -217,25 +222,9 @@ static int clip_seg(const piece *pc, p2 *a, p2 *b) {
 
 /* The chord of line (o, u) through convex piece 'pc': [*ta, *tb]; 0 if it misses. */
 static int chord(const piece *pc, p2 o, p2 u, double *ta, double *tb) {
-  double t0 = -HUGE_VAL, t1 = HUGE_VAL;
-  for (int i = 0; i < pc->n; i++) {
-    p2 e = sub2(pc->v[(i + 1) % pc->n], pc->v[i]);
-    double num = cross2(e, sub2(o, pc->v[i])), den = cross2(e, u);
-    if (den == 0) {
-      if (num < 0) return 0;
-      continue;
-    }
-    double t = -num / den;
-    if (den > 0) {
-      if (t > t0) t0 = t;
-    } else if (t < t1) {
-      t1 = t;
-    }
-  }
-  if (!(t0 < t1)) return 0;
-  *ta = t0;
-  *tb = t1;
-  return 1;
+  *ta = -HUGE_VAL;
+  *tb = HUGE_VAL;
+  return clip_param(pc, o, u, ta, tb);
 }
 
 /* Drops vertices that repeat the previous one or lie on the line through their neighbours
