@@ -55,6 +55,13 @@ mpi 2 "${q[@]}" --threads 2 -o "$t/c2t2" cornell && same "$t/c1" "$t/c2t2" corne
   "cornell, 2 ranks x 2 threads" || bad "cornell 2x2: exit $?"
 mpi 3 "${q[@]}" --threads 1 --balance area -o "$t/c3a" cornell && same "$t/c1" "$t/c3a" cornell \
   "cornell, 3 ranks, --balance area (whole surfaces)" || bad "cornell --balance area: exit $?"
+# room at these settings is cut along contact lines (--cut-contacts, default on): every rank
+# cuts the scene it loads alike, so the pieces, their ids and the answer are the same
+"$hrad" "${q[@]}" --threads 1 -o "$t/r1" room 2> /dev/null || bad "plain room run failed"
+for np in 2 3; do
+  mpi "$np" "${q[@]}" --threads 1 -o "$t/r$np-mpi" room && same "$t/r1" "$t/r$np-mpi" room \
+    "room (cut along contact lines), $np ranks" || bad "room on $np ranks: exit $?"
+done
 # stats.json says how a run was spread: ranks, and the balancing (null in one process)
 sj() { grep -c -e "\"ranks\": $2," -e "\"balance\": $3" "$1/stats.json"; }
 [ "$(sj "$t/c1" 1 null)" = 2 ] \
