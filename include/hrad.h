@@ -285,7 +285,7 @@ typedef struct hr_options {
   double importance;  /* E in [0, 1]: a receiver smaller than the finest regular element
                          (A_e / 4) may take errors (A_e / 4 / A)^E times larger, for it weighs
                          that much less in the picture and in area-weighted error; 0: every
-                         receiver alike (docs/design.md, "Importance"); default 0.5 */
+                         receiver alike (docs/design.md, "Importance"); default 0.7 */
 } hr_options;
 
 enum { HR_CLUSTER_AUTO = 0, HR_CLUSTER_ON = 1, HR_CLUSTER_OFF = 2 };

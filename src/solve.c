@@ -49,10 +49,11 @@ void hr_options_default(hr_options *o) {
   o->max_iters = 1000;
   o->max_links = 5e7;
   o->extrapolate = 1;
-  /* receivers below A_e / 4 take (A_e / 4 / A)^0.5 times the tolerance: the conference room
-   * 4.07% -> 4.52% RMS against the path tracer in 0.55 of the time, a better trade than
-   * --bf-low gives (docs/design.md, "Importance") */
-  o->importance = 0.5;
+  /* receivers below A_e / 4 take (A_e / 4 / A)^0.7 times the tolerance: E = 0.5 took the
+   * conference room 4.07% -> 4.52% RMS against the path tracer in 0.55 of the time, a better
+   * trade than --bf-low gives; 0.7, since contact cuts, 3.59% -> 3.86% in 0.88 of the time,
+   * under a minute (docs/design.md, "Importance") */
+  o->importance = 0.7;
 }
 
 /* A clustered solve's first linking, before any light is gathered (--bf-first 0), refines at
