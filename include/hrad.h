@@ -165,13 +165,14 @@ typedef struct hr_cut_stats {
 } hr_cut_stats;
 /* Cuts every surface of at least len x len area along the lines where other surfaces at least
  * len tall stand on it or pass through it in front (a pillar's wall on a floor; not a chair's
- * runner), where there is open space on both sides of the line (not under a closed box: the solver's open fractions
- * deal with that), so that no element the solver makes from it carries light across such a
- * wall. Contacts within len / 256 of the plane, lines whose contacts cover at least len / 2,
- * no piece narrower than len / 2. The pieces are convex quads and triangles with the surface's
- * material and polygon (hr_surface.cut = 1), so outputs per polygon keep their rows. The CLI
- * passes len = sqrt(A_e) (--cut-contacts, docs/design.md "Contact cuts"). Deterministic;
- * HR_ERR_INVALID for a len not finite and > 0, HR_ERR_NOMEM (the scene unchanged). */
+ * runner), where there is open space on both sides of the line (not under a closed box: the
+ * solver's open fractions deal with that), so that no element the solver makes from it
+ * carries light across such a wall. Contacts within len / 256 of the plane, lines whose
+ * contacts cover at least len / 2, no piece narrower than len / 2. The pieces are convex quads
+ * and triangles with the surface's material and polygon (hr_surface.cut = 1), so outputs per
+ * polygon keep their rows. The CLI passes len = sqrt(A_e) (--cut-contacts, docs/design.md
+ * "Contact cuts"). Deterministic; HR_ERR_INVALID for a len not finite and > 0, HR_ERR_NOMEM
+ * (also when the ray casting structure cannot be built; the scene unchanged). */
 hr_status hr_scene_cut_contacts(hr_scene *s, double len, hr_cut_stats *stats);
 
 /* Result of adding a polygon. */

@@ -388,16 +388,6 @@ static int cmp_line(const void *pa, const void *pb) {
   return (a->o.y > b->o.y) - (a->o.y < b->o.y);
 }
 
-/* Covered length of line 'ln' within [ta, tb]. */
-static double covered_in(const line2 *ln, double ta, double tb) {
-  double c = 0;
-  for (int k = 0; k < ln->nt; k++) {
-    double a = fmax(ln->t[2 * k], ta), b = fmin(ln->t[2 * k + 1], tb);
-    if (b > a) c += b - a;
-  }
-  return c;
-}
-
 typedef struct {
   piece *p;
   int n, cap;
@@ -415,17 +405,21 @@ static int push_piece(piece_list *pl, const piece *p) {
   return 1;
 }
 
-/* The hull [*c0, *c1] of line ln's covered intervals within [ta, tb]. */
-static void covered_hull(const line2 *ln, double ta, double tb, double *c0, double *c1) {
+/* The covered length of line 'ln' within [ta, tb], and the hull [*c0, *c1] of its covered
+ * intervals there. */
+static double covered_in(const line2 *ln, double ta, double tb, double *c0, double *c1) {
+  double c = 0;
   *c0 = tb;
   *c1 = ta;
   for (int k = 0; k < ln->nt; k++) {
     double a = fmax(ln->t[2 * k], ta), b = fmin(ln->t[2 * k + 1], tb);
     if (b > a) {
+      c += b - a;
       *c0 = fmin(*c0, a);
       *c1 = fmax(*c1, b);
     }
   }
+  return c;
 }
 
 static p2 at_t(const line2 *ln, double t) {
@@ -473,8 +467,7 @@ static int cut_piece(piece_list *out, int i, const line2 *ln, const line2 *lines
                      double len, double delta, int *cut) {
   double ta, tb, c0, c1;
   if (!chord(&out->p[i], ln->o, ln->u, &ta, &tb)) return 1;
-  if (covered_in(ln, ta, tb) < len / 4) return 1;
-  covered_hull(ln, ta, tb, &c0, &c1);
+  if (covered_in(ln, ta, tb, &c0, &c1) < len / 4) return 1;
   piece mid = out->p[i], before, after, l, r;
   int has_before = 0, has_after = 0;
   p2 o, dir;
@@ -536,7 +529,7 @@ static int chop(piece_list *out, int i, double ratio) {
 typedef struct {
   const hr_scene *s;
   grid g;
-  hr_vis *vis;  /* the uncut scene's, for the open test */
+  hr_vis *vis;  /* the uncut scene's, for the open test (NULL until a line needs it) */
   double lift;  /* hr_vis_lift */
   double len;
   int *stamp;   /* stamp[q] = the surface that last looked at q */
@@ -675,6 +668,15 @@ static int keep_lines(cut_ctx *c, int ns, const frame *f, const piece *outline, 
       for (int k = 0; k < nl; k++) free(lines[k].t);
       return -1;
     }
+    /* the ray casting structure, built when a first line needs the open test */
+    if (ln.covered >= len / 2 && !c->vis) {
+      hr_err err;
+      if (hr_vis_create(c->s, &c->vis, &err) != HR_OK) {
+        free(ln.t);
+        for (int k = 0; k < nl; k++) free(lines[k].t);
+        return -1;
+      }
+    }
     if (ln.covered >= len / 2 && side_open(c, f, outline, &ln, 1, delta / 2) &&
         side_open(c, f, outline, &ln, -1, delta / 2))
       lines[nl++] = ln;
@@ -763,9 +765,6 @@ hr_status hr_scene_cut_contacts(hr_scene *s, double len, hr_cut_stats *stats) {
   hr_status ret = HR_ERR_NOMEM;
   c.stamp = malloc((size_t)(s->nsurfs ? s->nsurfs : 1) * sizeof *c.stamp);
   if (!c.stamp || !grid_build(s, len / 256, &c.g)) goto done;
-  hr_err err;
-  if ((ret = hr_vis_create(s, &c.vis, &err)) != HR_OK) goto done;
-  ret = HR_ERR_NOMEM;
   for (int i = 0; i < s->nsurfs; i++) c.stamp[i] = -1;
   for (int i = 0; i < s->nsurfs; i++) {
     const hr_surface *sf = &s->surfs[i];

@@ -223,7 +223,6 @@ struct hr_solver {
 };
 
 enum { HR_PHASE_NONE, HR_PHASE_INIT, HR_PHASE_REFINE, HR_PHASE_PUSHPULL, HR_PHASE_CLUSTER };
-/* 1 if the test hook makes this rank fail now, in 'phase'. */
 /* The slack of a receiver of this area, by which the refinement oracles multiply its tolerance
  * (its reference radiosity bref): 1 down to a regular leaf's area A_e / 4, (A_e / 4 / area)^E
  * below it, E = --importance (docs/design.md, "Importance"). A degenerate receiver gets 1. */
@@ -243,6 +242,7 @@ static inline double hr_elem_imp_area(const hr_solver *s, int32_t idx) {
   return e->area;
 }
 
+/* 1 if the test hook makes this rank fail now, in 'phase'. */
 static inline int hr_test_fail(const hr_solver *s, int phase) {
   const int it = s->iterations + 1;
   return s->fail_phase == phase && s->rank == s->fail_rank &&
